@@ -1,0 +1,164 @@
+"""Provenance attributes and netCDF writing shared by every stage.
+
+Every dataset the workflow writes carries the contract's global attributes
+(``config_sha256``, ``git_commit``, ``created_utc``, ``rule``,
+``package_versions``) plus the CF globals ``Conventions``, ``title``,
+``source`` and ``history``.  They are set here, once, at the end of a stage
+(xarray drops attrs in most operations, so setting them earlier is wasted).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import subprocess
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import xarray as xr
+
+__all__ = [
+    "config_sha256",
+    "git_commit",
+    "package_versions",
+    "provenance_attrs",
+    "write_dataset",
+    "code_files",
+]
+
+#: Distributions whose versions are recorded in every dataset.
+TRACKED_PACKAGES = (
+    "numpy", "scipy", "pandas", "xarray", "netCDF4", "statsmodels",
+    "scikit-learn", "scikit-fem", "meshio", "snakemake", "opensim", "pypardiso",
+    "finger-rehab-workflow",
+)
+
+_REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def config_sha256(config_slice: Any) -> str:
+    """SHA-256 of the canonical JSON of the part of the config a rule uses."""
+    text = json.dumps(_jsonable(config_slice), sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def git_commit() -> str:
+    """Commit of the working tree the code runs from (``+dirty`` if modified), or ``unknown``."""
+    env_commit = os.environ.get("FINGERFLOW_GIT_COMMIT")
+    if env_commit:
+        return env_commit
+    try:
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=_REPO_ROOT, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        if not sha:
+            return "unknown"
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=_REPO_ROOT, capture_output=True, text=True, timeout=10,
+        ).stdout.strip()
+        return sha + ("+dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def package_versions(extra: tuple[str, ...] = ()) -> dict[str, str]:
+    """Installed versions of the tracked distributions (missing ones are left out)."""
+    out: dict[str, str] = {}
+    for name in TRACKED_PACKAGES + tuple(extra):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def provenance_attrs(*, rule: str, config_slice: Any, title: str, source: str = "") -> dict[str, str]:
+    """The global attributes of the data contract for one dataset."""
+    now = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
+    return {
+        "Conventions": "CF-1.10",
+        "title": title,
+        "source": source or "finger-rehab-workflow (Chung & Venter 2024 pipeline)",
+        "history": f"{now} rule {rule}: finger-rehab-workflow {package_versions().get('finger-rehab-workflow', '?')}",
+        "config_sha256": config_sha256(config_slice),
+        "git_commit": git_commit(),
+        "created_utc": now,
+        "rule": rule,
+        "package_versions": json.dumps(package_versions(), sort_keys=True),
+    }
+
+
+def _encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
+    enc: dict[str, dict[str, Any]] = {}
+    for name, var in ds.data_vars.items():
+        e: dict[str, Any] = {}
+        if np.issubdtype(var.dtype, np.floating):
+            e["_FillValue"] = np.nan
+            e["zlib"] = True
+            e["complevel"] = 4
+        elif var.dtype == bool:
+            # netCDF4 has no boolean type: store as int8 and let xarray decode it back.
+            e["dtype"] = "i1"
+        enc[name] = e
+    for name, coord in ds.coords.items():
+        if np.issubdtype(coord.dtype, np.floating):
+            enc[name] = {"_FillValue": None}
+    return enc
+
+
+def write_dataset(
+    ds: xr.Dataset,
+    path: str | os.PathLike,
+    *,
+    rule: str,
+    config_slice: Any,
+    title: str,
+    source: str = "",
+) -> Path:
+    """Attach provenance and write ``ds`` to ``path`` as netCDF4 atomically.
+
+    The file appears only once complete (written to a temporary name, then
+    renamed), so an interrupted job never leaves a half-written result.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ds = ds.copy()
+    ds.attrs.update(provenance_attrs(rule=rule, config_slice=config_slice, title=title, source=source))
+    tmp = path.with_name(path.name + ".part")
+    ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=_encoding(ds))
+    os.replace(tmp, path)
+    return path
+
+
+def code_files(*modules: str) -> list[str]:
+    """Source files of ``workflow`` sub-packages/modules, for rule inputs.
+
+    Listing them as inputs makes Snakemake rerun a rule when the science it
+    calls changes (CLARIFICATIONS 20).  ``modules`` are dotted names relative
+    to ``workflow`` (e.g. ``"doe"``, ``"fem"``).
+    """
+    pkg = Path(__file__).resolve().parent
+    files: list[str] = [str(pkg / "provenance.py")]
+    for mod in modules:
+        p = pkg.joinpath(*mod.split("."))
+        if p.is_dir():
+            files += sorted(str(f) for f in p.rglob("*.py"))
+        else:
+            files.append(str(p.with_suffix(".py")))
+    # Relative paths keep the DAG independent of where the clone lives.
+    return sorted({os.path.relpath(f) for f in files})
