@@ -1,0 +1,197 @@
+"""Sweep plumbing: ray design, shards, merge, symmetry, resumption.
+
+The solver here is a TEST DOUBLE: a smooth analytic function with the unit's
+symmetries (swapping P_T and P_B negates angle and moment; P_T = P_B gives 0).
+It is not a model of the actuator.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from workflow import sweep
+from workflow.provenance import write_dataset
+
+
+def double_angle(pt, pb):
+    """Test double, deg: antisymmetric in (pt, pb), stiffening with mean pressure."""
+    pt, pb = np.asarray(pt, float), np.asarray(pb, float)
+    return 12.0 * np.tanh((pt - pb) / 250.0) * (1.0 - 0.2 * (pt + pb) / 600.0)
+
+
+def double_moment(pt, pb):
+    """Test double, N m: antisymmetric in (pt, pb)."""
+    pt, pb = np.asarray(pt, float), np.asarray(pb, float)
+    return 2.0e-3 * (pt - pb) * (1.0 + 0.1 * (pt + pb) / 600.0)
+
+
+class DoubleSolver:
+    """Callable ray solver returning the double's values; counts calls; can fail on chosen rays."""
+
+    def __init__(self, fail_ratio=None, raise_ratio=None, interrupt_ratio=None):
+        self.calls = []
+        self.fail_ratio, self.raise_ratio, self.interrupt_ratio = fail_ratio, raise_ratio, interrupt_ratio
+
+    def __call__(self, direction, scales, progress=None):
+        pt0, pb0 = direction
+        ratio = pb0 / pt0
+        self.calls.append(round(ratio, 6))
+        if self.interrupt_ratio is not None and np.isclose(ratio, self.interrupt_ratio):
+            raise KeyboardInterrupt  # stands for a killed job
+        if self.raise_ratio is not None and np.isclose(ratio, self.raise_ratio):
+            raise RuntimeError("singular tangent")
+        pt, pb = scales * pt0, scales * pb0
+        status = np.zeros(scales.size, dtype=int)
+        angle, moment = double_angle(pt, pb), double_moment(pt, pb)
+        if self.fail_ratio is not None and np.isclose(ratio, self.fail_ratio):
+            status[-2] = 1  # diverged at the last-but-one step, the last one not reached
+            status[-1] = 2
+            angle[-2:] = np.nan
+            moment[-2:] = np.nan
+        for k in range(scales.size):
+            if progress is not None:
+                progress(k + 1)
+        return {
+            "p_top_kpa": pt, "p_bottom_kpa": pb, "bending_angle_deg": angle, "bending_moment_nm": moment,
+            "status": status, "newton_iterations": np.full(scales.size, 4), "wall_time_s": np.full(scales.size, 0.01),
+        }
+
+
+DESIGN = dict(p_max_kpa=300.0, n_ratios=6, n_pressures=5)
+
+
+def run_all(solver, n_shards=3, **kw):
+    design = {**DESIGN, **kw}
+    return [sweep.run_shard(solver, shard=i, n_shards=n_shards, **design) for i in range(min(n_shards, design["n_ratios"]))]
+
+
+def test_ray_design_covers_the_lower_triangle():
+    d = sweep.ray_design(300.0, 11, 10)
+    assert d["ratio"][0] == 0.0 and d["ratio"][-1] == 1.0
+    assert np.all(d["direction_kpa"][:, 1] <= d["direction_kpa"][:, 0])
+    assert d["scales"][0] > 0 and d["scales"][-1] == 1.0
+    np.testing.assert_allclose(np.diff(d["scales"]), 0.1)
+
+
+@pytest.mark.parametrize("n_ratios, n_shards", [(6, 1), (6, 4), (11, 11), (5, 9)])
+def test_every_ray_in_exactly_one_shard(n_ratios, n_shards):
+    shards = sweep.shard_rays(n_ratios, n_shards)
+    assert len(shards) == min(n_ratios, n_shards)
+    np.testing.assert_array_equal(np.sort(np.concatenate(shards)), np.arange(n_ratios))
+
+
+def test_merge_mirrors_and_symmetry():
+    merged = sweep.merge_shards(run_all(DoubleSolver()), n_ratios=6, n_pressures=5)
+    n = sweep.n_points_total(6, 5)
+    assert merged.sizes["point"] == n == 55
+    assert int(merged["mirrored"].sum()) == 25  # r = 1 ray not mirrored
+    pt, pb = merged["p_top_kpa"].values, merged["p_bottom_kpa"].values
+    # every mirrored point is the swapped twin of its source, with angle and moment negated
+    mir = np.flatnonzero(merged["mirrored"].values)
+    src = merged["source_point"].values[mir]
+    np.testing.assert_array_equal(pt[mir], pb[src])
+    np.testing.assert_array_equal(pb[mir], pt[src])
+    np.testing.assert_array_equal(merged["bending_angle_deg"].values[mir], -merged["bending_angle_deg"].values[src])
+    np.testing.assert_array_equal(merged["bending_moment_nm"].values[mir], -merged["bending_moment_nm"].values[src])
+    # the mirrored values equal what solving there would give (the double has the symmetry)
+    np.testing.assert_allclose(merged["bending_angle_deg"].values[mir], double_angle(pt[mir], pb[mir]), atol=1e-12)
+    # no duplicate pressure pairs; the square [0, 300]^2 is covered on both sides of the diagonal
+    pairs = set(zip(np.round(pt, 9), np.round(pb, 9)))
+    assert len(pairs) == n
+    assert pt.max() == pb.max() == 300.0
+    assert np.all(merged["wall_time_s"].values[mir] == 0)
+    diag = np.isclose(pt, pb)
+    np.testing.assert_allclose(merged["bending_angle_deg"].values[diag], 0.0, atol=1e-12)
+
+
+def test_failed_points_kept_with_status():
+    solver = DoubleSolver(fail_ratio=0.4, raise_ratio=0.8)
+    merged = sweep.merge_shards(run_all(solver), n_ratios=6, n_pressures=5)
+    st = merged["status"].values
+    solved = ~merged["mirrored"].values
+    assert np.count_nonzero((st == 1) & solved) == 1
+    assert np.count_nonzero((st == 2) & solved) == 1
+    assert np.count_nonzero((st == 3) & solved) == 5  # the raising ray, all its samples
+    np.testing.assert_array_equal(merged["converged"].values, st == 0)
+    assert np.all(np.isnan(merged["bending_angle_deg"].values[st != 0]))
+    assert np.all(np.isfinite(merged["bending_angle_deg"].values[st == 0]))
+    # mirrors inherit the status of their twin
+    assert np.count_nonzero(st == 3) == 10
+    assert merged["status"].attrs["flag_meanings"].split()[0] == "converged"
+    assert list(merged["status"].attrs["flag_values"]) == [0, 1, 2, 3]
+
+
+def test_merge_rejects_missing_shard():
+    parts = run_all(DoubleSolver())
+    with pytest.raises(ValueError, match="missing or duplicated"):
+        sweep.merge_shards(parts[:-1], n_ratios=6, n_pressures=5)
+    with pytest.raises(ValueError, match="missing or duplicated"):
+        sweep.merge_shards(parts + parts[:1], n_ratios=6, n_pressures=5)
+
+
+def test_bad_status_code_is_an_error():
+    def bad(direction, scales):
+        n = scales.size
+        return (scales * direction[0], scales * direction[1], np.zeros(n), np.zeros(n), np.full(n, 7), np.zeros(n), np.zeros(n))
+
+    # An unknown code is a wiring error and is reported as a solver_error ray, not silently stored.
+    ds = sweep.run_shard(bad, shard=0, n_shards=1, **DESIGN)
+    assert np.all(ds["status"].values == 3)
+
+
+def test_progress_logging(caplog):
+    with caplog.at_level(logging.INFO):
+        sweep.run_shard(DoubleSolver(), shard=0, n_shards=2, **DESIGN)
+    msgs = [r.getMessage() for r in caplog.records if "points done" in r.getMessage()]
+    # per-sample progress from the solver (3 rays x 5 samples) plus one line per finished ray
+    assert any("points done 15 of 15" in m for m in msgs)
+    assert any("points done 1 of 15" in m for m in msgs)
+    assert all("s per point" in m for m in msgs)
+
+
+def shard_path(root, i):
+    return root / f"shard{i}.nc"
+
+
+def run_missing(solver, root, n_shards):
+    """What Snakemake does on a rerun: produce only the shard files that are missing."""
+    for i in range(n_shards):
+        path = shard_path(root, i)
+        if not path.exists():
+            ds = sweep.run_shard(solver, shard=i, n_shards=n_shards, **DESIGN)
+            write_dataset(ds, path, rule="sweep_shard", config_slice=DESIGN, title="test shard")
+
+
+def test_interrupted_sweep_resumes_missing_shards_only(tmp_path):
+    n_shards = 3
+    # first run is killed while solving shard 1 (its ray r = 0.2)
+    with pytest.raises(KeyboardInterrupt):
+        run_missing(DoubleSolver(interrupt_ratio=0.2), tmp_path, n_shards)
+    assert shard_path(tmp_path, 0).exists() and not shard_path(tmp_path, 1).exists()
+    assert not list(tmp_path.glob("*.part"))  # nothing half-written left behind
+    rerun = DoubleSolver()
+    run_missing(rerun, tmp_path, n_shards)
+    # shard 0 (rays 0, 3) was not recomputed; shards 1 (rays 1, 4) and 2 (rays 2, 5) were
+    assert sorted(rerun.calls) == [0.2, 0.4, 0.8, 1.0]
+    resumed = sweep.merge_shards(sorted(tmp_path.glob("shard*.nc")), n_ratios=6, n_pressures=5)
+    fresh = sweep.merge_shards(run_all(DoubleSolver(), n_shards=n_shards), n_ratios=6, n_pressures=5)
+    xr.testing.assert_identical(resumed.drop_attrs(), fresh.drop_attrs())
+
+
+def test_shard_roundtrip_netcdf(tmp_path):
+    ds = sweep.run_shard(DoubleSolver(fail_ratio=0.0), shard=0, n_shards=2, **DESIGN)
+    path = write_dataset(ds, tmp_path / "s.nc", rule="sweep_shard", config_slice=DESIGN, title="t")
+    back = xr.load_dataset(path)
+    xr.testing.assert_identical(back.drop_attrs(deep=False), ds.drop_attrs(deep=False))
+    # write_dataset stores booleans as int8 (see provenance._encoding); values survive
+    np.testing.assert_array_equal(back["converged"].values.astype(bool), back["status"].values == 0)
+    assert back.attrs["rule"] == "sweep_shard"
+
+
+def test_make_solver_names_issue_4():
+    with pytest.raises(NotImplementedError, match="issue 4"):
+        sweep.make_solver("3d", {})
