@@ -1,0 +1,24 @@
+# Patient-specific design workflow for a soft pneumatic finger-rehabilitation
+# actuator, after Chung & Venter 2024. This file is only a table of contents:
+# the config is validated in rules/common.smk, the rules live in rules/*.smk
+# (one file per stage, in DAG order) and call the `workflow` package.
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+report: "report/workflow.rst"
+
+
+include: "rules/common.smk"
+include: "rules/doe.smk"
+include: "rules/musculoskeletal.smk"
+
+
+rule all:
+    input:
+        get_final_output(),
+    default_target: True

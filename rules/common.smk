@@ -1,0 +1,57 @@
+# Config validation, lookup tables and input functions. The only .smk file
+# with Python code; the stage files hold nothing but rules.
+from snakemake.utils import validate
+
+from workflow import settings
+from workflow.provenance import code_files
+
+validate(config, "../config/schema.yaml")
+# Checks JSON Schema cannot express (cross references between sections),
+# still before any job starts.
+settings.check_config(config)
+
+PATIENTS = sorted(config["patients"])
+
+
+wildcard_constraints:
+    patient="|".join(PATIENTS) if PATIENTS else "NONE",
+
+
+def cfg(*keys):
+    """The config slice a rule depends on (its hash goes into the outputs)."""
+    return {k: config[k] for k in keys if k in config}
+
+
+def patient_cfg(wildcards):
+    """One patient's slice: editing one patient leaves the others alone."""
+    return {
+        "patient": {wildcards.patient: config["patients"][wildcards.patient]},
+        "anthropometry": config["anthropometry"],
+        "exercises": config["exercises"],
+        "rsm": config["rsm"],
+    }
+
+
+def get_final_output():
+    out = [
+        "results/doe/ccd.nc",
+        "results/doe/scaling.nc",
+        "results/validation/scaling.nc",
+        "results/musculoskeletal/moments.nc",
+        "results/musculoskeletal/rsm.nc",
+        "results/musculoskeletal/rsm_r2.png",
+    ]
+    out += expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS)
+    return out
+
+
+def moments_source():
+    """The backend's moments file that becomes results/musculoskeletal/moments.nc."""
+    if config["musculoskeletal"]["backend"] == "opensim":
+        return "results/musculoskeletal/moments_opensim.nc"
+    return "results/musculoskeletal/moments_table.nc"
+
+
+def get_patient(wildcards):
+    """Param function: one patient's config entry."""
+    return config["patients"][wildcards.patient]

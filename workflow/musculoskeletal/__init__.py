@@ -1,0 +1,2 @@
+"""Joint moments of the finger: backends (authors' table export, OpenSim model),
+response surfaces and patient loads."""
