@@ -1,0 +1,296 @@
+"""A unit's bending angle under an external end moment, and inverse pressure queries.
+
+Model (CLARIFICATIONS 1, 6).  At pressures P = (P_T, P_B) a unit (one chamber)
+has two measured ends of its moment-angle curve: the free bending angle
+theta_f(P) (no end moment) and the blocked moment M_b(P) (the end couple that
+holds its angle at zero).  Between them the unit is modelled as a torsional
+spring with stiffness k(P) = M_b(P) / theta_f(P), in N m per degree:
+
+    theta(P, M) = theta_f(P) - M / k(P)  +  c * (M / k) * (theta_f - M / k) / theta_s
+
+* ``M`` (N m, per unit) is the moment the unit delivers to its load, i.e. the
+  load's resisting moment at the unit's end, positive in the flexion sense
+  (the sign of M_b when only the top chambers are pressurised).  So M = 0
+  gives the free angle and M = M_b gives zero angle: the two ends are exact for
+  every c.  A positive M reduces a flexion angle; a negative (assisting) M
+  increases it.
+* ``c`` (dimensionless, default 0 = linear spring) is a shape correction that
+  bends the curve between its ends while keeping both ends fixed;
+  ``theta_s`` (deg) is a fixed angle scale (the largest free angle of the
+  sweep) that keeps the term regular where theta_f -> 0.  ``c`` is meant to be
+  calibrated with `fit_shape` against FEA runs at prescribed end moments, and
+  the model checked with `verify` (issue 5 item 4).  Until such runs exist,
+  c = 0.
+* Outside 0 <= M/M_b <= 1 the model is an extrapolation of the spring.
+* Near P_T = P_B both theta_f and M_b vanish and their ratio is ill-conditioned.
+  There k is taken at the nearby pair (p_m + h, p_m - h) with p_m = (P_T + P_B)/2
+  and h = ``offset_kpa``/2 (by symmetry k(P_T, P_B) = k(P_B, P_T), so this is a
+  first-order estimate of the limit), whenever |theta_f| < ``theta_floor_deg`` or
+  the ratio is not positive.
+
+Vectorised: every function broadcasts its array arguments.  The cascade
+planner calls `UnitModel.angle_deg`, `free_angle_deg` and `blocked_moment_nm`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import brentq, minimize_scalar
+
+__all__ = [
+    "UnitModel",
+    "load_unit_model",
+    "fit_shape",
+    "verify",
+    "pressures_on_ray",
+    "iso_angle_pairs",
+    "min_norm_pressures",
+    "INVERSE_STATUS",
+]
+
+#: Status of an inverse query (CF flag_values -> flag_meanings).
+INVERSE_STATUS = {0: "found", 1: "unreachable_within_p_max"}
+
+ArrayFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class UnitModel:
+    """Angle of one unit (deg) as a function of (P_T, P_B) in kPa and end moment in N m.
+
+    ``free_angle`` and ``blocked_moment`` are vectorised callables of
+    (p_top_kpa, p_bottom_kpa), e.g. a fitted `workflow.surrogates.Surrogate`'s
+    ``angle_deg`` and ``moment_nm``.
+    """
+
+    free_angle: ArrayFn
+    blocked_moment: ArrayFn
+    p_max_kpa: float = 300.0
+    shape_c: float = 0.0
+    theta_scale_deg: float | None = None
+    theta_floor_deg: float = 0.05
+    offset_kpa: float = 10.0
+
+    @classmethod
+    def from_surrogate(cls, surrogate, **kwargs) -> "UnitModel":
+        """Unit model on a fitted surrogate (its training range sets p_max)."""
+        kwargs.setdefault("p_max_kpa", surrogate.p_max_kpa)
+        return cls(surrogate.angle_deg, surrogate.moment_nm, **kwargs)
+
+    # -- the two ends -----------------------------------------------------
+    def free_angle_deg(self, p_top_kpa, p_bottom_kpa) -> np.ndarray:
+        """Free bending angle per unit (M = 0), deg."""
+        pt, pb = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float))
+        return np.asarray(self.free_angle(pt, pb), float).reshape(pt.shape)
+
+    def blocked_moment_nm(self, p_top_kpa, p_bottom_kpa) -> np.ndarray:
+        """Blocked moment per unit (angle held at 0), N m."""
+        pt, pb = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float))
+        return np.asarray(self.blocked_moment(pt, pb), float).reshape(pt.shape)
+
+    def stiffness_nm_per_deg(self, p_top_kpa, p_bottom_kpa) -> np.ndarray:
+        """Spring stiffness k = M_b / theta_f, N m per degree (limit estimate near P_T = P_B)."""
+        pt, pb = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float))
+        th = self.free_angle_deg(pt, pb)
+        mb = self.blocked_moment_nm(pt, pb)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.asarray(mb / th, float).copy()
+        ill = ~((np.abs(th) >= self.theta_floor_deg) & (k > 0) & np.isfinite(k))
+        if np.any(ill):
+            pm = 0.5 * (pt[ill] + pb[ill])
+            h = 0.5 * self.offset_kpa
+            hi, lo = pm + h, np.maximum(pm - h, 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                k_off = self.blocked_moment_nm(hi, lo) / self.free_angle_deg(hi, lo)
+            k[ill] = np.where(k_off > 0, k_off, np.nan)
+        return k if k.ndim else k[()]
+
+    @property
+    def theta_s(self) -> float:
+        """Angle scale of the shape term, deg: given, or the largest |free angle| on P_B = 0."""
+        if self.theta_scale_deg is not None:
+            return float(self.theta_scale_deg)
+        p = np.linspace(0.0, self.p_max_kpa, 61)
+        return float(np.nanmax(np.abs(self.free_angle_deg(p, 0.0))))
+
+    # -- the model --------------------------------------------------------
+    def angle_deg(self, p_top_kpa, p_bottom_kpa, m_ext_nm=0.0) -> np.ndarray:
+        """Bending angle per unit, deg, under the end moment ``m_ext_nm`` (N m, per unit)."""
+        pt, pb, m = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float),
+                                        np.asarray(m_ext_nm, float))
+        th = self.free_angle_deg(pt, pb)
+        u = np.zeros_like(th)  # M / k, deg
+        nz = m != 0  # at M = 0 the angle is the free angle, k not needed
+        if np.any(nz):
+            u[nz] = m[nz] / self.stiffness_nm_per_deg(pt[nz], pb[nz])
+        out = th - u
+        if self.shape_c:
+            out = out + self.shape_c * u * (th - u) / self.theta_s
+        return out
+
+    def with_shape(self, c: float) -> "UnitModel":
+        """The same model with shape correction ``c`` (theta_s frozen at its current value)."""
+        return replace(self, shape_c=float(c), theta_scale_deg=self.theta_s)
+
+
+def load_unit_model(path: str | Path, **kwargs) -> UnitModel:
+    """Unit model on a surrogate saved by `workflow.surrogates.save_surrogate`."""
+    from workflow.surrogates import load_surrogate
+
+    return UnitModel.from_surrogate(load_surrogate(path), **kwargs)
+
+
+# -- calibration hook (FEA runs at prescribed end moments) -------------------
+def fit_shape(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg) -> UnitModel:
+    """Least-squares shape correction c from FEA angles at prescribed end moments.
+
+    The model is linear in c, so c = sum(r b) / sum(b^2) with r the residual of
+    the linear spring and b = (M/k)(theta_f - M/k)/theta_s.  c is clipped to
+    (-0.99, 0.99), where the curve stays monotonic between its ends.
+    """
+    base = replace(model, shape_c=0.0, theta_scale_deg=model.theta_s)
+    pt, pb, m, a = (np.ravel(np.asarray(x, float)) for x in np.broadcast_arrays(p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg))
+    th = base.free_angle_deg(pt, pb)
+    u = m / base.stiffness_nm_per_deg(pt, pb)
+    b = u * (th - u) / base.theta_s
+    r = a - (th - u)
+    ok = np.isfinite(b) & np.isfinite(r)
+    if not np.any(b[ok] != 0):
+        raise ValueError("the FEA runs do not constrain the shape (need 0 < M < M_b at some point)")
+    c = float(np.sum(r[ok] * b[ok]) / np.sum(b[ok] ** 2))
+    return base.with_shape(float(np.clip(c, -0.99, 0.99)))
+
+
+def verify(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg) -> dict[str, np.ndarray | float]:
+    """Model against direct FEA angles at prescribed end moments: predictions and errors (deg)."""
+    pred = model.angle_deg(p_top_kpa, p_bottom_kpa, m_ext_nm)
+    err = pred - np.asarray(angle_fea_deg, float)
+    return {
+        "predicted_deg": pred,
+        "error_deg": err,
+        "max_abs_error_deg": float(np.nanmax(np.abs(err))),
+        "rmse_deg": float(np.sqrt(np.nanmean(err**2))),
+    }
+
+
+# -- inverse queries --------------------------------------------------------
+def _ray_points(t, ratio):
+    """Pressures on the ray of ratio P_B/P_T = ``ratio`` (inf: P_T = 0) whose larger pressure is t."""
+    ratio = np.asarray(ratio, float)
+    top = np.where(ratio <= 1.0, 1.0, 1.0 / np.where(ratio > 0, ratio, 1.0))
+    bot = np.where(ratio <= 1.0, ratio, 1.0)
+    return t * top, t * bot
+
+
+def _first_root(g: Callable[[float], float], grid: np.ndarray, values: np.ndarray, xtol: float) -> float:
+    """Smallest root of g on the grid's first sign change, refined by Brent's method; NaN if none."""
+    if values[0] == 0.0:
+        return float(grid[0])
+    s = np.sign(values)
+    idx = np.flatnonzero((s[:-1] * s[1:] <= 0) & np.isfinite(values[:-1]) & np.isfinite(values[1:]))
+    if idx.size == 0:
+        return np.nan
+    i = int(idx[0])
+    if values[i + 1] == 0.0:
+        return float(grid[i + 1])
+    return float(brentq(g, grid[i], grid[i + 1], xtol=xtol))
+
+
+def pressures_on_ray(model: UnitModel, angle_deg, m_ext_nm, ratio, *, p_max_kpa: float | None = None,
+                     n_grid: int = 61, xtol_kpa: float = 1e-3) -> dict[str, np.ndarray]:
+    """Lowest pressures on the ray P_B/P_T = ``ratio`` giving ``angle_deg`` under ``m_ext_nm``.
+
+    ``ratio`` in [0, inf] (inf = bottom chamber only); the ray's larger
+    pressure runs over 0..p_max.  Broadcasts its arguments; returns
+    ``p_top_kpa``, ``p_bottom_kpa`` (NaN if unreachable) and ``status``
+    (`INVERSE_STATUS`).
+    """
+    p_max = model.p_max_kpa if p_max_kpa is None else p_max_kpa
+    a, m, r = np.broadcast_arrays(np.asarray(angle_deg, float), np.asarray(m_ext_nm, float), np.asarray(ratio, float))
+    t = np.linspace(0.0, p_max, n_grid)
+    pt_grid, pb_grid = _ray_points(t[None, :], r.ravel()[:, None])
+    vals = model.angle_deg(pt_grid, pb_grid, m.ravel()[:, None]) - a.ravel()[:, None]
+    t_root = np.full(a.size, np.nan)
+    for i in range(a.size):
+        def g(x, i=i):
+            pt, pb = _ray_points(x, r.flat[i])
+            return float(model.angle_deg(pt, pb, m.flat[i]) - a.flat[i])
+
+        t_root[i] = _first_root(g, t, vals[i], xtol_kpa)
+    pt, pb = _ray_points(t_root, r.ravel())
+    return {
+        "p_top_kpa": pt.reshape(a.shape),
+        "p_bottom_kpa": pb.reshape(a.shape),
+        "status": np.where(np.isnan(t_root), 1, 0).reshape(a.shape),
+    }
+
+
+def _iso(model: UnitModel, angle_deg: float, m_ext_nm: float, p_max: float, phi: np.ndarray, n_grid: int,
+         xtol_kpa: float) -> np.ndarray:
+    """First crossing radius rho (kPa) on each direction phi (rad); NaN where none inside the square."""
+    frac = np.linspace(0.0, 1.0, n_grid)
+    edge = p_max / np.maximum(np.cos(phi), np.sin(phi))  # rho at the edge of [0, p_max]^2
+    rho = frac[None, :] * edge[:, None]
+    vals = model.angle_deg(rho * np.cos(phi)[:, None], rho * np.sin(phi)[:, None], m_ext_nm) - angle_deg
+    root = np.full(phi.size, np.nan)
+    for i, ph in enumerate(phi):
+        def g(x, ph=ph):
+            return float(model.angle_deg(x * np.cos(ph), x * np.sin(ph), m_ext_nm) - angle_deg)
+
+        root[i] = _first_root(g, rho[i], vals[i], xtol_kpa)
+    return root
+
+
+def iso_angle_pairs(model: UnitModel, angle_deg: float, m_ext_nm: float = 0.0, *, p_max_kpa: float | None = None,
+                    n_directions: int = 91, n_grid: int = 61, xtol_kpa: float = 1e-3) -> dict[str, np.ndarray]:
+    """The (P_T, P_B) pairs giving ``angle_deg`` under ``m_ext_nm``: the first crossing on each
+    direction phi in [0, 90] deg (P_T = rho cos phi, P_B = rho sin phi) inside the square [0, p_max]^2.
+
+    Returns ``phi_deg``, ``p_top_kpa``, ``p_bottom_kpa`` and ``norm_kpa`` (= rho) per direction
+    (NaN where the direction does not reach the angle).
+    """
+    p_max = model.p_max_kpa if p_max_kpa is None else p_max_kpa
+    phi = np.linspace(0.0, np.pi / 2, n_directions)
+    root = _iso(model, float(angle_deg), float(m_ext_nm), p_max, phi, n_grid, xtol_kpa)
+    return {"phi_deg": np.degrees(phi), "p_top_kpa": root * np.cos(phi), "p_bottom_kpa": root * np.sin(phi),
+            "norm_kpa": root}
+
+
+def min_norm_pressures(model: UnitModel, angle_deg, m_ext_nm=0.0, *, p_max_kpa: float | None = None,
+                       n_directions: int = 91, n_grid: int = 61, xtol_kpa: float = 1e-3) -> dict[str, np.ndarray]:
+    """The (P_T, P_B) of least sqrt(P_T^2 + P_B^2) giving ``angle_deg`` under ``m_ext_nm``.
+
+    Scans `iso_angle_pairs`, then refines the best direction with a bounded
+    scalar search between its neighbours.  Broadcasts over ``angle_deg`` and
+    ``m_ext_nm``; returns ``p_top_kpa``, ``p_bottom_kpa`` (NaN if unreachable)
+    and ``status`` (`INVERSE_STATUS`).
+    """
+    p_max = model.p_max_kpa if p_max_kpa is None else p_max_kpa
+    a, m = np.broadcast_arrays(np.asarray(angle_deg, float), np.asarray(m_ext_nm, float))
+    pt_out, pb_out = np.full(a.size, np.nan), np.full(a.size, np.nan)
+    for i in range(a.size):
+        iso = iso_angle_pairs(model, float(a.flat[i]), float(m.flat[i]), p_max_kpa=p_max,
+                              n_directions=n_directions, n_grid=n_grid, xtol_kpa=xtol_kpa)
+        norm = iso["norm_kpa"]
+        if np.all(np.isnan(norm)):
+            continue
+        j = int(np.nanargmin(norm))
+        best = (norm[j], iso["phi_deg"][j])
+        lo = iso["phi_deg"][max(j - 1, 0)]
+        hi = iso["phi_deg"][min(j + 1, norm.size - 1)]
+        if hi > lo and norm[j] > 0:
+            def f(ph_deg, i=i):
+                r = _iso(model, float(a.flat[i]), float(m.flat[i]), p_max, np.radians([ph_deg]), n_grid, xtol_kpa)
+                return r[0] if np.isfinite(r[0]) else np.inf
+
+            res = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
+            if np.isfinite(res.fun) and res.fun < best[0]:
+                best = (res.fun, res.x)
+        pt_out[i] = best[0] * np.cos(np.radians(best[1]))
+        pb_out[i] = best[0] * np.sin(np.radians(best[1]))
+    return {"p_top_kpa": pt_out.reshape(a.shape), "p_bottom_kpa": pb_out.reshape(a.shape),
+            "status": np.where(np.isnan(pt_out), 1, 0).reshape(a.shape)}
