@@ -1,0 +1,99 @@
+"""2D -> 3D pressure mapping: exact scale on analytic doubles, flags, round trip, dataset.
+
+theta_3D and theta_2D are TEST DOUBLES: theta_2D(P) = theta_3D(P / a), so the
+exact scale is s = a for every pair (the ratio is kept).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from workflow import mapping, surrogates, sweep
+from workflow.provenance import write_dataset
+from workflow.settings import REPO_ROOT
+
+TABLE8 = REPO_ROOT / "resources" / "table08_planned_pressures_3d.csv"
+
+
+def theta_3d(pt, pb):
+    pt, pb = np.asarray(pt, float), np.asarray(pb, float)
+    return 12.0 * np.tanh((pt - pb) / 250.0) * (1.0 - 0.2 * (pt + pb) / 600.0)
+
+
+def theta_2d_of(a):
+    return lambda pt, pb: theta_3d(np.asarray(pt, float) / a, np.asarray(pb, float) / a)
+
+
+def test_exact_scale_and_ratio_on_table8():
+    planned = mapping.read_planned_pressures(TABLE8)
+    ds = mapping.mapping_dataset(planned, theta_3d, theta_2d_of(0.8), p_max_2d_kpa=300.0, p_max_3d_kpa=300.0)
+    assert dict(ds.sizes) == {"exercise": 5, "group": 4, "chamber": 2}
+    eq = ds["status"] == 1
+    # Table 8 has P_T = P_B for DIP in TGE1-3: no unique scale
+    assert sorted(map(str, ds["exercise"].values[np.any(eq.values, axis=1)])) == ["TGE1", "TGE2", "TGE3"]
+    assert np.all(np.isnan(ds["scale"].where(eq)).values[eq.values])
+    assert all(r.startswith("P_T = P_B") for r in ds["reason"].values[eq.values])
+    ok = ds["status"] == 0
+    assert int(ok.sum()) == 17
+    np.testing.assert_allclose(ds["scale"].values[ok.values], 0.8, rtol=1e-7)
+    np.testing.assert_allclose(ds["pressure_2d_kpa"].values[ok.values], 0.8 * ds["pressure_3d_kpa"].values[ok.values],
+                               rtol=1e-7)
+    np.testing.assert_allclose(ds["angle_2d_deg"].values[ok.values], ds["angle_3d_deg"].values[ok.values], atol=1e-7)
+    np.testing.assert_allclose(ds["pressure_3d_kpa"].sel(exercise="TGE4", group="PIP").values, [291.84, 0.0])
+
+
+def test_pairs_outside_the_2d_grid_are_flagged():
+    pt = np.array([100.0, 150.0, 250.0, 0.0])
+    pb = np.array([0.0, 20.0, 0.0, 280.0])
+    r = mapping.map_pairs(pt, pb, theta_3d, theta_2d_of(1.5), p_max_2d_kpa=300.0)
+    # the 2D pair would need 1.5 x the 3D pressures: > 300 kPa for the last two
+    assert list(r["status"]) == [0, 0, 2, 2]
+    np.testing.assert_allclose(r["scale"][:2], 1.5, rtol=1e-7)
+    assert np.all(np.isnan(r["p_top_2d_kpa"][2:]))
+
+
+def test_round_trip():
+    pt = np.array([291.84, 215.31, 159.61, 0.0, 60.0])
+    pb = np.array([0.0, 0.0, 259.95, 120.0, 30.0])
+    fwd = mapping.map_pairs(pt, pb, theta_3d, theta_2d_of(0.7), p_max_2d_kpa=300.0)
+    back = mapping.map_pairs(fwd["p_top_2d_kpa"], fwd["p_bottom_2d_kpa"], theta_2d_of(0.7), theta_3d,
+                             p_max_2d_kpa=300.0)
+    np.testing.assert_allclose(back["p_top_2d_kpa"], pt, atol=1e-6)
+    np.testing.assert_allclose(back["p_bottom_2d_kpa"], pb, atol=1e-6)
+    np.testing.assert_allclose(fwd["scale"] * back["scale"], 1.0, rtol=1e-8)
+
+
+@pytest.mark.parametrize("regressor, tol", [("rbf", 0.01), ("knn", 0.15)])
+def test_on_fitted_surrogates(regressor, tol):
+    def solver_of(a):
+        def solve(direction, scales):
+            pt, pb = scales * direction[0], scales * direction[1]
+            n = scales.size
+            th = theta_2d_of(a)(pt, pb)
+            return pt, pb, th, 0.001 * th, np.zeros(n, int), np.ones(n, int), np.zeros(n)
+        return solve
+
+    def fitted(a, fea):
+        resp = sweep.merge_shards([sweep.run_shard(solver_of(a), shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=11,
+                                                   n_pressures=12)], n_ratios=11, n_pressures=12)
+        return surrogates.fit_surrogate(resp, regressor, fea=fea)
+
+    s3, s2 = fitted(1.0, "3d"), fitted(0.8, "2d")
+    planned = mapping.read_planned_pressures(TABLE8)
+    ds = mapping.mapping_dataset(planned, s3.angle_deg, s2.angle_deg, p_max_2d_kpa=s2.p_max_kpa,
+                                 p_max_3d_kpa=s3.p_max_kpa)
+    ok = ds["status"].values == 0
+    assert ok.sum() == 17
+    np.testing.assert_allclose(ds["scale"].values[ok], 0.8, rtol=tol)
+
+
+def test_dataset_roundtrip(tmp_path):
+    planned = mapping.read_planned_pressures(TABLE8)
+    ds = mapping.mapping_dataset(planned, theta_3d, theta_2d_of(0.8), p_max_2d_kpa=300.0, p_max_3d_kpa=300.0)
+    path = write_dataset(ds, tmp_path / "m.nc", rule="mapping_2d3d", config_slice={}, title="t")
+    back = xr.load_dataset(path)
+    np.testing.assert_allclose(back["pressure_2d_kpa"].values, ds["pressure_2d_kpa"].values)
+    np.testing.assert_array_equal(back["reason"].values.astype(str), ds["reason"].values.astype(str))
+    assert back["status"].attrs["flag_meanings"] == "mapped equal_pressures outside_2d_grid"
