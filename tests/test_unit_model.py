@@ -135,3 +135,21 @@ def test_on_a_fitted_surrogate():
     pt, pb = np.array([280.0, 120.0]), np.array([30.0, 200.0])
     np.testing.assert_allclose(um.angle_deg(pt, pb, 0.0), s.angle_deg(pt, pb))
     np.testing.assert_allclose(um.angle_deg(pt, pb, s.moment_nm(pt, pb)), 0.0, atol=1e-9)
+
+
+def test_finite_everywhere_on_a_knn_surrogate():
+    """The cascade needs a finite angle at every pressure pair, also on KNN's flat stretches."""
+    from workflow import surrogates, sweep
+
+    def solver(direction, scales):
+        pt, pb = scales * direction[0], scales * direction[1]
+        n = scales.size
+        return pt, pb, free(pt, pb), blocked(pt, pb), np.zeros(n, int), np.ones(n, int), np.zeros(n)
+
+    resp = sweep.merge_shards([sweep.run_shard(solver, shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=6,
+                                               n_pressures=5)], n_ratios=6, n_pressures=5)
+    um = UnitModel.from_surrogate(surrogates.fit_surrogate(resp, "knn", fea="3d", k=4))
+    g = np.linspace(0, 300, 31)
+    th = um.angle_deg(g[:, None], g[None, :], 0.004)
+    assert np.all(np.isfinite(th))
+    assert np.all(um.stiffness_nm_per_deg(g[:, None], g[None, :]) > 0)

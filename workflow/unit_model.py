@@ -26,7 +26,8 @@ spring with stiffness k(P) = M_b(P) / theta_f(P), in N m per degree:
   There k is taken at the nearby pair (p_m + h, p_m - h) with p_m = (P_T + P_B)/2
   and h = ``offset_kpa``/2 (by symmetry k(P_T, P_B) = k(P_B, P_T), so this is a
   first-order estimate of the limit), whenever |theta_f| < ``theta_floor_deg`` or
-  the ratio is not positive.
+  the ratio is not positive; h is doubled (up to 32 times) while the offset pair
+  itself has |theta_f| below the floor (a flat stretch of a KNN surrogate).
 
 Vectorised: every function broadcasts its array arguments.  The cascade
 planner calls `UnitModel.angle_deg`, `free_angle_deg` and `blocked_moment_nm`.
@@ -100,13 +101,20 @@ class UnitModel:
         with np.errstate(divide="ignore", invalid="ignore"):
             k = np.asarray(mb / th, float).copy()
         ill = ~((np.abs(th) >= self.theta_floor_deg) & (k > 0) & np.isfinite(k))
-        if np.any(ill):
+        k[ill] = np.nan
+        # Offset estimate; doubled (up to 5 times) where a flat stretch of the
+        # surrogate (e.g. KNN) still gives no usable ratio.
+        for attempt in range(6):
+            ill = ~np.isfinite(k)
+            if not np.any(ill):
+                break
             pm = 0.5 * (pt[ill] + pb[ill])
-            h = 0.5 * self.offset_kpa
+            h = 0.5 * self.offset_kpa * 2**attempt
             hi, lo = pm + h, np.maximum(pm - h, 0.0)
             with np.errstate(divide="ignore", invalid="ignore"):
-                k_off = self.blocked_moment_nm(hi, lo) / self.free_angle_deg(hi, lo)
-            k[ill] = np.where(k_off > 0, k_off, np.nan)
+                th_off = self.free_angle_deg(hi, lo)
+                k_off = self.blocked_moment_nm(hi, lo) / th_off
+            k[ill] = np.where((k_off > 0) & (np.abs(th_off) >= self.theta_floor_deg), k_off, np.nan)
         return k if k.ndim else k[()]
 
     @property
