@@ -5,7 +5,7 @@ rule joint_moments_table:
     input:
         ccd="results/doe/ccd.nc",
         table=config["musculoskeletal"]["table_path"],
-        code=code_files("musculoskeletal", "pipeline"),
+        code=code_files("musculoskeletal.table_backend", "musculoskeletal.moments", "pipeline"),
     output:
         "results/musculoskeletal/moments_table.nc",
     log:
@@ -36,7 +36,7 @@ rule rsm:
     input:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
-        code=code_files("musculoskeletal", "pipeline", "plots"),
+        code=code_files("musculoskeletal.rsm", "musculoskeletal.moments", "pipeline", "plots"),
     output:
         rsm="results/musculoskeletal/rsm.nc",
         plot=report("results/musculoskeletal/rsm_r2.png", caption="../report/rsm.rst", category="Musculoskeletal"),
@@ -56,7 +56,7 @@ rule patient_loads:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         rsm="results/musculoskeletal/rsm.nc",
-        code=code_files("musculoskeletal", "pipeline"),
+        code=code_files("musculoskeletal.patient_loads", "musculoskeletal.rsm", "musculoskeletal.moments", "doe", "pipeline"),
     output:
         "results/patients/{patient}/joint_loads.nc",
     params:
