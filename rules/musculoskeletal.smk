@@ -56,9 +56,15 @@ rule patient_loads:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         rsm="results/musculoskeletal/rsm.nc",
-        code=code_files("musculoskeletal.patient_loads", "musculoskeletal.rsm", "musculoskeletal.moments", "doe", "pipeline"),
+        code=code_files("musculoskeletal.patient_loads", "musculoskeletal.rsm", "musculoskeletal.moments", "doe", "pipeline", "plots"),
     output:
-        "results/patients/{patient}/joint_loads.nc",
+        loads="results/patients/{patient}/joint_loads.nc",
+        plot=report(
+            "results/patients/{patient}/joint_loads.png",
+            caption="../report/joint_loads.rst",
+            category="Patients",
+            subcategory="{patient}",
+        ),
     params:
         patient=get_patient,
         exercises=config["exercises"],

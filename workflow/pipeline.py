@@ -123,7 +123,7 @@ def write_rsm(ccd: str | Path, moments_nc: str | Path, out: str | Path, exercise
 
 def write_joint_loads(patient_name: str, patient: Mapping, ccd: str | Path, moments_nc: str | Path, rsm_nc: str | Path,
                       out: str | Path, exercises: Mapping, anthropometry: Mapping, prediction_alpha: float,
-                      config_slice: Any, *, rule: str = "patient_loads") -> xr.Dataset:
+                      config_slice: Any, *, rule: str = "patient_loads", plot: str | Path | None = None) -> xr.Dataset:
     design = design_from_ccd(ccd)
     with xr.open_dataset(moments_nc) as m, xr.open_dataset(rsm_nc) as r:
         ds = patient_loads.joint_loads(
@@ -132,4 +132,7 @@ def write_joint_loads(patient_name: str, patient: Mapping, ccd: str | Path, mome
         )
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title=f"Joint loads and safety limits of patient {patient_name}")
+    if plot is not None:
+        from .plots import plot_joint_loads
+        plot_joint_loads(ds, plot)
     return ds

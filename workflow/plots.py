@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-__all__ = ["plot_rsm_r2"]
+__all__ = ["plot_rsm_r2", "plot_joint_loads"]
 
 
 def plot_rsm_r2(ds: xr.Dataset, out: str | Path) -> None:
@@ -30,6 +30,28 @@ def plot_rsm_r2(ds: xr.Dataset, out: str | Path) -> None:
     ax.set_xlim(min(0.5, float(np.nanmin(ds["r2"].values)) - 0.02), 1.0)
     ax.legend(fontsize=7, loc="lower left")
     ax.set_title("Response-surface fits of joint moments (15 CCD runs)")
+    fig.tight_layout()
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+
+
+def plot_joint_loads(ds: xr.Dataset, out: str | Path) -> None:
+    """Passive moments per exercise and joint with prediction intervals, and the active limits."""
+    joints = list(ds["joint"].values)
+    exercises = list(ds["exercise"].values)
+    fig, axes = plt.subplots(1, len(joints), figsize=(3.2 * len(joints), 3.2), sharey=False)
+    for ax, joint in zip(np.atleast_1d(axes), joints):
+        m = ds["passive_moment_nm"].sel(joint=joint).values
+        lo = ds["passive_moment_lo_nm"].sel(joint=joint).values
+        hi = ds["passive_moment_hi_nm"].sel(joint=joint).values
+        x = np.arange(len(exercises))
+        ax.bar(x, m, color="tab:blue", alpha=0.7, label="passive (95 % PI)")
+        ax.errorbar(x, m, yerr=[m - lo, hi - m], fmt="none", ecolor="k", capsize=3)
+        ax.set_xticks(x, exercises, fontsize=8)
+        ax.set_title(f"{joint}: active limit {float(ds['active_limit_nm'].sel(joint=joint)):.2f} N m", fontsize=9)
+        ax.set_ylabel("joint moment [N m]")
+    fig.suptitle(f"Patient {ds.attrs.get('patient', '')}: passive joint moments at the exercise targets", fontsize=10)
     fig.tight_layout()
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
