@@ -1,0 +1,174 @@
+"""Cascade forward model and planning, against an analytic unit stand-in.
+
+The stand-in (test double only) is a unit that bends ``c (P_T - P_B)`` when
+free and is a linear torsional spring of stiffness ``k0 + k1 (P_T + P_B)``
+about that angle: swapping the pressures negates angle and moment, equal
+pressures give no bend, and the blocked moment is stiffness x free angle
+(about 8.7 deg and 0.2 N m at 300 kPa, the magnitudes of CLARIFICATIONS 10).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workflow import cascade as C
+from workflow import finger as F
+
+from test_finger import DENSITIES, mean_finger
+
+ACTUATOR = dict(depth=6.8, gap=1, width=20, height=15, ch_depth=2.8, ch_width=14, ch_height=13,
+                bot_layer=2, paper_width=0.2)
+LIMITS = (5.4, 4.1, 1.1)  # N m, the size of the mean finger's active moments
+
+
+class LinearUnit:
+    def __init__(self, c=0.029, k0=0.01, k1=4.3e-5):
+        self.c, self.k0, self.k1 = c, k0, k1  # deg/kPa, N m/deg, N m/(deg kPa)
+
+    def free_angle_deg(self, pt, pb):
+        return self.c * (np.asarray(pt, float) - np.asarray(pb, float))
+
+    def stiffness(self, pt, pb):
+        return self.k0 + self.k1 * (np.asarray(pt, float) + np.asarray(pb, float))
+
+    def blocked_moment_nm(self, pt, pb):
+        return self.free_angle_deg(pt, pb) * self.stiffness(pt, pb)
+
+    def angle_deg(self, pt, pb, m):
+        return self.free_angle_deg(pt, pb) - np.asarray(m, float) / self.stiffness(pt, pb)
+
+
+def springs():
+    return [F.JointSpring.from_points([90], [0.058]),
+            F.JointSpring.from_points([90, 100], [0.0189, 0.0285]),
+            F.JointSpring.from_points([80], [0.00324])]
+
+
+def model(unit=None, densities=DENSITIES, **kw):
+    f = mean_finger(springs=springs(), densities=densities)
+    return C.build_cascade(f, unit or LinearUnit(), actuator_dims_mm=ACTUATOR, **kw)
+
+
+def test_layout_counts_units_from_segment_lengths():
+    m = model()
+    assert m.n_per_group == {"CMC": 5, "MCP": 6, "PIP": 4, "DIP": 4}
+    assert m.unit_length_m == pytest.approx(7.8e-3)
+    # Table 6 unit: two sides of (base layer + block - pocket) plus paper.
+    vol = 2 * (2 * 20 * 7.8 + 6.8 * 20 * 15 - 2.8 * 14 * 13)
+    assert m.unit_mass_kg == pytest.approx((1240 * vol + 800 * 0.2 * 20 * 7.8) * 1e-9)
+    assert m.n_per_group == C.unit_counts([50.6, 30.6, 26.5], 7.8, 5, 1)
+
+
+def test_equal_pressures_give_a_straight_actuator():
+    m = model()
+    for p in (0.0, 120.0, 300.0):
+        th, nodes = C.free_shape(m, [p] * 8)
+        np.testing.assert_allclose(th, 0.0, atol=1e-12)
+        np.testing.assert_allclose(nodes[:, 1], nodes[0, 1], atol=1e-12)
+        assert nodes[-1, 0] - nodes[0, 0] == pytest.approx(m.n_units * m.unit_length_m)
+    # Top only bends it towards the palm (clockwise), bottom only the other way.
+    th, nodes = C.free_shape(m, [300, 0] * 4)
+    assert np.all(th > 8) and nodes[-1, 1] < nodes[0, 1]
+    th_b, _ = C.free_shape(m, [0, 300] * 4)
+    np.testing.assert_allclose(th_b, -th)
+
+
+def test_zero_pressure_gives_the_gravity_droop_of_the_springs():
+    # A massless actuator whose units are (almost) limp at zero pressure carries
+    # no moment: the finger hangs where its springs hold its own weight.
+    limp = LinearUnit(k0=1e-7)
+    m = model(unit=limp, actuator_weight=False)
+    eq = C.solve_equilibrium(m, np.zeros(8))
+    droop, ok = F.gravity_droop_deg(m.finger)
+    assert eq.converged and ok
+    np.testing.assert_allclose(eq.joint_angles_deg, droop, atol=0.05)
+    assert droop[0] > 10  # a real droop, not a trivial zero
+    # With the actuator's weight and stiffness the finger still droops, into flexion.
+    eq2 = C.solve_equilibrium(model(), np.zeros(8))
+    assert eq2.converged and np.all(eq2.joint_angles_deg > 0)
+
+
+@pytest.mark.parametrize("p", [[0] * 8, [286, 0, 286, 0, 0, 217, 187, 187], [290, 0] * 4,
+                               [0, 200] * 4, [150, 260, 150, 260, 215, 0, 215, 0]])
+def test_moment_balance_residual_below_tolerance(p):
+    m = model()
+    eq = C.solve_equilibrium(m, p)
+    assert eq.converged
+    r = C.moment_residuals(m, eq)
+    assert np.max(np.abs(r["joint_nm"])) < 1e-9
+    assert np.max(np.abs(r["span_deg"])) < 1e-6
+    # Independent statics: each span carries the spring moment minus the weights'
+    # flexion moments, computed here from the poses of the bodies.
+    f = m.finger
+    th = eq.joint_angles_deg
+    joints, _ = f.joint_positions(th)
+    coms = f.pose(th, f.coms_ref, np.arange(3))
+    units = f.pose(th, m.unit_ref, m.unit_body)
+    g = 9.81
+    for j in range(3):
+        grav = np.sum(f.masses_kg[j:] * g * (coms[j:, 0] - joints[j, 0]))
+        grav += np.sum(m.unit_mass_kg * g * (units[:, 0] - joints[j, 0]) * (m.unit_body >= j))
+        assert f.springs[j].moment_nm(th[j]) - grav == pytest.approx(eq.actuator_moments_nm[j], abs=1e-12)
+    # Every unit of a span bends by the unit model's angle under the span moment.
+    unit = LinearUnit()
+    pt = np.asarray(p, float).reshape(4, 2)
+    span_of_group = [0, 0, 1, 2]
+    for g_ in range(4):
+        expect = unit.angle_deg(pt[g_, 0], pt[g_, 1], eq.actuator_moments_nm[span_of_group[g_]])
+        assert eq.unit_angles_deg[g_] == pytest.approx(expect, abs=1e-9)
+
+
+def test_top_pressure_flexes_and_bottom_pressure_extends():
+    m = model()
+    zero = C.solve_equilibrium(m, np.zeros(8)).joint_angles_deg
+    flex = C.solve_equilibrium(m, [200, 0] * 4).joint_angles_deg
+    ext = C.solve_equilibrium(m, [0, 200] * 4).joint_angles_deg
+    assert np.all(flex > zero) and np.all(ext < zero)
+
+
+def test_inverse_plan_reaches_a_reachable_target():
+    m = model()
+    p_known = np.array([220, 0, 220, 0, 150, 0, 0, 60], float)
+    target = C.solve_equilibrium(m, p_known).joint_angles_deg
+    plan = C.plan_exercise(m, target, tol_deg=5.0, active_limits_nm=LIMITS)
+    assert plan.achieved, plan.reason
+    assert np.max(np.abs(plan.equilibrium.joint_angles_deg - target)) <= 5.0
+    np.testing.assert_allclose(plan.pressures_kpa[0:2], plan.pressures_kpa[2:4])  # CMC tied to MCP
+    assert np.all((plan.pressures_kpa >= 0) & (plan.pressures_kpa <= 300))
+    # Least squares: no more pressure than the pressures that made the target.
+    assert plan.pressures_kpa @ plan.pressures_kpa <= p_known @ p_known + 1e-6
+    # A tighter tolerance needs more pressure and still lands inside it.
+    tight = C.plan_exercise(m, target, tol_deg=1.0, active_limits_nm=LIMITS)
+    assert tight.achieved and np.max(np.abs(tight.equilibrium.joint_angles_deg - target)) <= 1.0
+    assert tight.pressures_kpa @ tight.pressures_kpa > plan.pressures_kpa @ plan.pressures_kpa
+
+
+def test_unreachable_target_is_marked_with_a_reason():
+    m = model()
+    plan = C.plan_exercise(m, [90, 100, 80], tol_deg=5.0, active_limits_nm=LIMITS)
+    assert not plan.achieved
+    assert "PIP" in plan.reason and "300 kPa limit" in plan.reason
+    # A safety limit below what the plan needs is reported too.
+    plan2 = C.plan_exercise(m, [0, 0, 0], tol_deg=5.0, active_limits_nm=(1e-4, 1e-4, 1e-4))
+    assert not plan2.achieved and "safety limit" in plan2.reason
+
+
+def test_heavier_finger_needs_more_pressure():
+    light = C.plan_exercise(model(), [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS)
+    heavy = C.plan_exercise(model(densities={k: 2 * v for k, v in DENSITIES.items()}), [0, 0, 0],
+                            tol_deg=5.0, active_limits_nm=LIMITS)
+    assert light.achieved and heavy.achieved
+    assert heavy.pressures_kpa @ heavy.pressures_kpa > 1.2 * (light.pressures_kpa @ light.pressures_kpa)
+    # Holding the finger straight against gravity takes the bottom (extending) chambers.
+    assert heavy.pressures_kpa[3] > light.pressures_kpa[3] > 0
+    assert heavy.pressures_kpa[2] == 0
+
+
+def test_non_convergence_is_reported_not_raised():
+    class Broken(LinearUnit):
+        def angle_deg(self, pt, pb, m):
+            return np.full(np.shape(m), np.nan)
+
+    eq = C.solve_equilibrium(model(unit=Broken()), [100, 0] * 4)
+    assert not eq.converged and eq.status != 0

@@ -1,0 +1,622 @@
+"""Cascade of reduced-order actuator units on a finger: forward model and planning.
+
+Model (planar, the finger's sagittal plane; frame and signs of :mod:`workflow.finger`)
+-------------------------------------------------------------------------------------
+The paper's reduced-order setup (section 3.1, Fig. 15-16, Tables 7-8), made a
+static equilibrium that can be solved for any pressures:
+
+* **Actuator**: ``N`` units of backbone length ``L_R = depth + gap`` (7.8 mm,
+  CLARIFICATIONS 1) in four groups LA_CMC, LA_MCP, LA_PIP, LA_DIP, each with its
+  own top/bottom pressures.  Unit count rule (our reading of Fig. 16):
+  ``n_CMC = round(cmc_length_fraction * L3MC / L_R)`` (over the hand, default
+  half the metacarpal), ``n_MCP = round(L3PP / L_R)``,
+  ``n_PIP = round(L3MP / L_R)``, ``n_DIP = round(L3DP / L_R) + tip_units`` (the
+  paper's extra length beyond the tip).
+* **Joint-rotation spans** (the groups' roles in Fig. 18): the rotation across
+  the MCP joint is taken up by the LA_CMC and LA_MCP units in series, across PIP
+  by LA_PIP, across DIP by LA_DIP.  The straps keep each span on the finger, so
+  the span's total bend equals the joint angle (plus the strap's give), and all
+  units of a span carry the same bending moment ``m_X``: the moment the actuator
+  applies about joint X.  A unit's angle is the unit model's
+  ``angle_deg(P_T, P_B, m_X)`` (free angle at ``m = 0``, zero at the blocked
+  moment).
+* **Straps** at PIP and DIP (240 kN/m) transmit ``m_X`` as a force with the
+  joint's dorsal moment arm ``a_X`` (the joint centre's depth below the dorsal
+  line: 8.43 and 5.67 mm for the mean finger, the paper's dummy-finger arms):
+  strap force ``m_X / a_X`` and give ``m_X / (k a_X^2)`` of extra span rotation.
+  The MCP span is held by the sliding support at the hand end (no give).
+* **Equilibrium** of the finger+actuator section at each joint:
+  ``spring_X(theta_X) = G_X(theta) + m_X``, where ``G_X`` is the flexion
+  moment of gravity about X of the phalanges and of the actuator units distal
+  to X (each unit's weight on the backbone, carried by the body under it in the
+  straight pose; units beyond the tip by the distal phalanx).  Substituting
+  ``m_X`` gives three equations in the three joint angles, solved with
+  ``scipy.optimize.root`` (Powell hybrid, then Levenberg-Marquardt, then
+  continuation in pressure).  Failure is a status in the result, never an
+  exception.
+
+Planning: per exercise, the moments the actuator must supply at the target pose
+follow directly (``m*_X = spring_X(theta*_X) - G_X(theta*)``, the paper's Table 7
+logic); per span, the pressures of least sum of squares whose span bend under
+``m*_X`` lies within ``tol - margin`` of the target; then an SLSQP polish on
+the coupled forward model with the angle tolerance and the active safety
+limits (``|m_X| <= limit_X``) as constraints (CLARIFICATIONS 16).  ``P_CMC`` may
+be tied to ``P_MCP`` as in all the paper's plans.
+
+The unit response object is injected: anything with vectorised
+``angle_deg(p_top_kpa, p_bottom_kpa, m_ext_nm)``, ``free_angle_deg(p_top, p_bottom)``
+and ``blocked_moment_nm(p_top, p_bottom)`` (per unit; positive = flexion).
+
+Units: SI inside (m, N, rad); pressures kPa, angles deg, moments N m, forces N
+at the interfaces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Protocol, Sequence
+
+import numpy as np
+from scipy.optimize import minimize, root
+
+from workflow.finger import JOINTS, Finger, gravity_moments_nm
+
+__all__ = [
+    "GROUPS",
+    "CHAMBERS",
+    "PRESSURE_NAMES",
+    "SPANS",
+    "STATUS_FLAGS",
+    "UnitResponse",
+    "unit_counts",
+    "unit_section",
+    "CascadeModel",
+    "build_cascade",
+    "actuator_gravity_moments_nm",
+    "Equilibrium",
+    "solve_equilibrium",
+    "free_shape",
+    "moment_residuals",
+    "Plan",
+    "plan_exercise",
+    "pressures_vector",
+    "pressures_table",
+]
+
+GROUPS = ("CMC", "MCP", "PIP", "DIP")
+CHAMBERS = ("top", "bottom")
+PRESSURE_NAMES = tuple(f"P_{g}_{c}" for g in GROUPS for c in ("T", "B"))
+#: Groups whose units take up the rotation of each joint (in series).
+SPANS = {"MCP": ("CMC", "MCP"), "PIP": ("PIP",), "DIP": ("DIP",)}
+#: Forward-solve status codes (CF flag_values / flag_meanings).
+STATUS_FLAGS = {0: "converged", 1: "not_converged", 2: "non_finite"}
+
+
+class UnitResponse(Protocol):
+    """What the cascade needs from the actuator surrogate (issue 5)."""
+
+    def angle_deg(self, p_top_kpa, p_bottom_kpa, m_ext_nm): ...
+
+    def free_angle_deg(self, p_top_kpa, p_bottom_kpa): ...
+
+    def blocked_moment_nm(self, p_top_kpa, p_bottom_kpa): ...
+
+
+# --------------------------------------------------------------------------
+# Layout
+# --------------------------------------------------------------------------
+def unit_counts(segment_lengths_mm: Sequence[float], unit_length_mm: float,
+                cmc_units: int = 3, tip_units: int = 1) -> dict[str, int]:
+    """Units per group from the phalanx lengths (L3PP, L3MP, L3DP), mm.
+
+    ``n_MCP = round(L3PP/L_R)``, ``n_PIP = round(L3MP/L_R)``,
+    ``n_DIP = round(L3DP/L_R) + tip_units``, ``n_CMC = cmc_units``; at least one
+    unit per group.
+    """
+    lpp, lmp, ldp = (float(v) for v in segment_lengths_mm)
+    return {
+        "CMC": max(1, int(cmc_units)),
+        "MCP": max(1, int(round(lpp / unit_length_mm))),
+        "PIP": max(1, int(round(lmp / unit_length_mm))),
+        "DIP": max(1, int(round(ldp / unit_length_mm)) + int(tip_units)),
+    }
+
+
+def unit_section(dims_mm: Mapping[str, float]) -> dict[str, float]:
+    """Volumes (mm^3) of one unit and its bottom-side thickness (mm).
+
+    Per side (CLARIFICATIONS 2): base layer ``bot_layer`` over the unit length
+    ``depth + gap``, one block ``depth x width x height`` with an air pocket
+    ``ch_depth x ch_width x ch_height``; both sides plus the paper layer.  The
+    silicone between blocks above the base layer is left out (the gap is open).
+    """
+    d = dims_mm
+    lr = d["depth"] + d["gap"]
+    side = d["bot_layer"] * d["width"] * lr + d["depth"] * d["width"] * d["height"] \
+        - d["ch_depth"] * d["ch_width"] * d["ch_height"]
+    return {
+        "unit_length_mm": lr,
+        "silicone_mm3": 2.0 * side,
+        "paper_mm3": d["paper_width"] * d["width"] * lr,
+        "bottom_side_mm": d["bot_layer"] + d["height"] + 0.5 * d["paper_width"],
+    }
+
+
+@dataclass
+class CascadeModel:
+    """Finger + actuator, ready for :func:`solve_equilibrium`.
+
+    ``unit_group`` (N,) index into :data:`GROUPS`; ``unit_ref`` (N, 2) unit
+    centres on the backbone in the straight pose (m) and ``unit_body`` (N,) the
+    body carrying each (-1 hand, 0 PP, 1 MP, 2 DP); ``strap_arm_m`` (3,) the
+    moment arm of the strap at each joint (``nan`` at MCP: no strap, the
+    sliding support holds the span).  Masses kg, stiffness N/m.
+    """
+
+    finger: Finger
+    unit: Any
+    unit_group: np.ndarray
+    unit_ref: np.ndarray
+    unit_body: np.ndarray
+    unit_length_m: float
+    backbone_offset_m: float
+    unit_mass_kg: float
+    base_x_m: float
+    strap_stiffness_n_per_m: float
+    strap_arm_m: np.ndarray
+    gravity_m_s2: float
+    n_per_group: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def n_units(self) -> int:
+        return int(self.unit_group.size)
+
+    def span_counts(self) -> np.ndarray:
+        """(joint, group) number of units of each group in each joint's span."""
+        out = np.zeros((3, 4))
+        for j, joint in enumerate(JOINTS):
+            for g in SPANS[joint]:
+                out[j, GROUPS.index(g)] = self.n_per_group[g]
+        return out
+
+
+def build_cascade(
+    finger: Finger,
+    unit: Any,
+    *,
+    actuator_dims_mm: Mapping[str, float],
+    silicone_density: float = 1240.0,
+    paper_density: float = 800.0,
+    cmc_units: int | None = None,
+    cmc_length_fraction: float = 0.5,
+    tip_units: int = 1,
+    units_per_group: Mapping[str, int] | None = None,
+    strap_stiffness_n_per_m: float = 240e3,
+    gravity_m_s2: float | None = None,
+    actuator_weight: bool = True,
+) -> CascadeModel:
+    """Lay the actuator on the straight finger (see the module docstring).
+
+    ``actuator_dims_mm``: Table 6 names (depth, gap, width, height, ch_depth,
+    ch_width, ch_height, bot_layer, paper_width).  ``cmc_units`` defaults to
+    ``round(cmc_length_fraction * L3MC / L_R)`` (the hand part the actuator
+    covers; L3MC from the finger's dimensions, 76.8 mm if absent);
+    ``units_per_group`` overrides the rule group by group.  ``gravity_m_s2``
+    defaults to the finger's.  ``actuator_weight=False`` makes the actuator
+    massless.
+    """
+    sec = unit_section(actuator_dims_mm)
+    lr = sec["unit_length_mm"] * 1e-3
+    lengths_mm = [s.length_m * 1e3 for s in finger.segments]
+    if cmc_units is None:
+        l_mc = float(finger.dimensions_mm.get("L3MC", 76.8))
+        cmc_units = int(round(cmc_length_fraction * l_mc / sec["unit_length_mm"]))
+    counts = unit_counts(lengths_mm, sec["unit_length_mm"], cmc_units, tip_units)
+    for g, v in (units_per_group or {}).items():
+        if g not in GROUPS or int(v) < 1:
+            raise ValueError(f"units_per_group: bad entry {g}: {v}")
+        counts[g] = int(v)
+    groups = np.concatenate([np.full(counts[g], i) for i, g in enumerate(GROUPS)])
+    n = groups.size
+    base_x = -counts["CMC"] * lr
+    x = base_x + (np.arange(n) + 0.5) * lr
+    y_b = finger.dorsal_y_m + sec["bottom_side_mm"] * 1e-3
+    jx = finger.joints_ref[:, 0]
+    body = np.where(x < jx[0], -1, np.minimum(np.searchsorted(jx, x, side="right") - 1, 2))
+    mass = (silicone_density * sec["silicone_mm3"] + paper_density * sec["paper_mm3"]) * 1e-9
+    arms = finger.dorsal_y_m - finger.joints_ref[:, 1]
+    return CascadeModel(
+        finger=finger,
+        unit=unit,
+        unit_group=groups,
+        unit_ref=np.column_stack([x, np.full(n, y_b)]),
+        unit_body=body,
+        unit_length_m=lr,
+        backbone_offset_m=sec["bottom_side_mm"] * 1e-3,
+        unit_mass_kg=mass if actuator_weight else 0.0,
+        base_x_m=base_x,
+        strap_stiffness_n_per_m=float(strap_stiffness_n_per_m),
+        strap_arm_m=np.array([np.nan, arms[1], arms[2]]),
+        gravity_m_s2=finger.gravity_m_s2 if gravity_m_s2 is None else float(gravity_m_s2),
+        n_per_group=counts,
+    )
+
+
+def pressures_vector(p: Mapping[str, float] | Sequence[float]) -> np.ndarray:
+    """Eight pressures (kPa) in :data:`PRESSURE_NAMES` order from a mapping or sequence."""
+    if isinstance(p, Mapping):
+        return np.array([float(p.get(n, 0.0)) for n in PRESSURE_NAMES])
+    arr = np.asarray(p, float).ravel()
+    if arr.size != 8:
+        raise ValueError(f"need eight pressures, got {arr.size}")
+    return arr
+
+
+def pressures_table(p8: Sequence[float]) -> np.ndarray:
+    """(group, chamber) view of eight pressures."""
+    return np.asarray(p8, float).reshape(4, 2)
+
+
+# --------------------------------------------------------------------------
+# Statics
+# --------------------------------------------------------------------------
+def actuator_gravity_moments_nm(model: CascadeModel, angles_deg: Sequence[float]) -> np.ndarray:
+    """Flexion moment (N m) of the actuator units' weight about each joint."""
+    if model.unit_mass_kg == 0.0:
+        return np.zeros(3)
+    f = model.finger
+    joints, _ = f.joint_positions(angles_deg)
+    pos = f.pose(angles_deg, model.unit_ref, model.unit_body)
+    w = model.unit_mass_kg * model.gravity_m_s2
+    return np.array([w * np.sum((pos[:, 0] - joints[j, 0]) * (model.unit_body >= j)) for j in range(3)])
+
+
+def _strap_compliance(model: CascadeModel) -> np.ndarray:
+    """Extra span rotation per unit moment (rad per N m) from the straps' give."""
+    a = model.strap_arm_m
+    with np.errstate(invalid="ignore"):
+        c = 1.0 / (model.strap_stiffness_n_per_m * a * a)
+    return np.where(np.isfinite(c), c, 0.0)
+
+
+def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit angles per group (4,) and span bends (3,) in deg under span moments ``m_nm``."""
+    pt = pressures_table(p8)
+    # One vectorised call: the unit angle of every group under every span moment.
+    pg = np.repeat(pt, 3, axis=0)  # (12, 2): group-major
+    mm = np.tile(np.asarray(m_nm, float), 4)
+    th = np.asarray(model.unit.angle_deg(pg[:, 0], pg[:, 1], mm), float).reshape(4, 3)  # (group, joint)
+    counts = model.span_counts()  # (joint, group)
+    span = np.sum(counts * th.T, axis=1) + np.rad2deg(_strap_compliance(model) * m_nm)
+    unit_g = np.array([th[g, [j for j, jn in enumerate(JOINTS) if GROUPS[g] in SPANS[jn]][0]]
+                       for g in range(4)])
+    return unit_g, span
+
+
+def _required_moments(model: CascadeModel, angles_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Span moments that hold the pose, and their parts (spring, finger and actuator gravity)."""
+    f = model.finger
+    spring = np.array([float(sp.moment_nm(t)) for sp, t in zip(f.springs, angles_deg)])
+    g_f = gravity_moments_nm(f, angles_deg)
+    g_a = actuator_gravity_moments_nm(model, angles_deg)
+    return spring - g_f - g_a, spring, g_f, g_a
+
+
+@dataclass
+class Equilibrium:
+    """Static equilibrium of finger and actuator for one set of pressures.
+
+    Angles deg, moments N m (positive = flexion), forces N.
+    ``actuator_moments_nm``: the moment the actuator applies about each joint
+    (= the bending moment its units carry over that joint's span);
+    ``unit_angles_deg`` / ``unit_moments_nm``: per group (CMC, MCP, PIP, DIP);
+    ``strap_forces_n``: PIP and DIP strap forces (positive: pulling the finger
+    into flexion); ``residual_deg``: span bend minus joint angle.
+    """
+
+    pressures_kpa: np.ndarray
+    joint_angles_deg: np.ndarray
+    unit_angles_deg: np.ndarray
+    unit_moments_nm: np.ndarray
+    actuator_moments_nm: np.ndarray
+    spring_moments_nm: np.ndarray
+    finger_gravity_moments_nm: np.ndarray
+    actuator_gravity_moments_nm: np.ndarray
+    strap_forces_n: np.ndarray
+    residual_deg: np.ndarray
+    converged: bool
+    status: int
+    evaluations: int
+    continuation_steps: int
+
+
+def _residual(model: CascadeModel, p8: np.ndarray, th: np.ndarray) -> np.ndarray:
+    m, *_ = _required_moments(model, th)
+    _, span = _span_angles_deg(model, p8, m)
+    return span - th
+
+
+def _root(model, p8, x0, tol):
+    nfev = 0
+    best = (np.asarray(x0, float), np.inf)
+    for method in ("hybr", "lm"):
+        with np.errstate(all="ignore"):
+            sol = root(lambda t: _residual(model, p8, t), best[0] if np.isfinite(best[1]) else x0,
+                       method=method, tol=1e-12)
+        nfev += int(getattr(sol, "nfev", 0) or 0)
+        r = _residual(model, p8, sol.x)
+        err = float(np.max(np.abs(r))) if np.all(np.isfinite(r)) else np.inf
+        if err < best[1]:
+            best = (np.asarray(sol.x, float), err)
+        if err < tol:
+            break
+    return best[0], best[1], nfev
+
+
+def solve_equilibrium(
+    model: CascadeModel,
+    pressures_kpa: Sequence[float] | Mapping[str, float],
+    *,
+    x0_deg: Sequence[float] | None = None,
+    tol_deg: float = 1e-6,
+    continuation_steps: Sequence[int] = (5, 20),
+) -> Equilibrium:
+    """Static equilibrium for eight pressures (kPa, :data:`PRESSURE_NAMES` order).
+
+    Tries the root finders from ``x0_deg`` (default: straight), then
+    continuation in pressure from zero with 5 and then 20 equal steps.
+    ``tol_deg`` bounds the largest span-bend residual.  Never raises for lack
+    of convergence: see ``converged`` / ``status``.
+    """
+    p8 = pressures_vector(pressures_kpa)
+    x0 = np.zeros(3) if x0_deg is None else np.asarray(x0_deg, float)
+    th, err, nfev = _root(model, p8, x0, tol_deg)
+    used = 0
+    if not err < tol_deg:
+        for steps in continuation_steps:
+            tc = np.zeros(3)
+            for lam in np.linspace(0.0, 1.0, steps + 1)[1:]:
+                tc, err_c, n_c = _root(model, lam * p8, tc, tol_deg)
+                nfev += n_c
+                if not err_c < tol_deg:
+                    break
+            used = steps
+            if err_c < tol_deg:
+                th, err = tc, err_c
+                break
+    return _equilibrium(model, p8, th, err, tol_deg, nfev, used)
+
+
+def _equilibrium(model, p8, th, err, tol, nfev, used) -> Equilibrium:
+    m, spring, g_f, g_a = _required_moments(model, th)
+    unit_g, span = _span_angles_deg(model, p8, m)
+    unit_m = np.array([m[[j for j, jn in enumerate(JOINTS) if GROUPS[g] in SPANS[jn]][0]] for g in range(4)])
+    finite = np.all(np.isfinite(th)) and np.isfinite(err)
+    status = 0 if (finite and err < tol) else (1 if finite else 2)
+    return Equilibrium(
+        pressures_kpa=np.asarray(p8, float),
+        joint_angles_deg=np.asarray(th, float),
+        unit_angles_deg=unit_g,
+        unit_moments_nm=unit_m,
+        actuator_moments_nm=m,
+        spring_moments_nm=spring,
+        finger_gravity_moments_nm=g_f,
+        actuator_gravity_moments_nm=g_a,
+        strap_forces_n=(m / model.strap_arm_m)[1:],
+        residual_deg=span - th,
+        converged=status == 0,
+        status=status,
+        evaluations=int(nfev),
+        continuation_steps=int(used),
+    )
+
+
+def free_shape(model: CascadeModel, pressures_kpa, m_ext_nm: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Stand-alone actuator (no finger, no gravity): unit angles (deg, per unit)
+    and the backbone polyline (m) from the hand end, under a uniform moment."""
+    pt = pressures_table(pressures_vector(pressures_kpa))[model.unit_group]
+    th = np.asarray(model.unit.angle_deg(pt[:, 0], pt[:, 1], np.full(model.n_units, m_ext_nm)), float)
+    return th, backbone_polyline(model, th)
+
+
+def backbone_polyline(model: CascadeModel, unit_angles_deg: np.ndarray, start=None, heading_rad: float = 0.0) -> np.ndarray:
+    """Backbone nodes (N+1, 2) in m: each unit an arc of length L_R bent by its angle."""
+    th = np.deg2rad(np.asarray(unit_angles_deg, float))
+    L = model.unit_length_m
+    p = np.array([model.base_x_m, model.unit_ref[0, 1]]) if start is None else np.asarray(start, float)
+    nodes = [p]
+    psi = heading_rad
+    for t in th:
+        # Chord of an arc of length L turning by -t (flexion turns clockwise).
+        chord = L if abs(t) < 1e-9 else L * np.sin(t / 2) / (t / 2)
+        mid = psi - t / 2
+        p = p + chord * np.array([np.cos(mid), np.sin(mid)])
+        psi -= t
+        nodes.append(p)
+    return np.array(nodes)
+
+
+def moment_residuals(model: CascadeModel, eq: Equilibrium) -> dict[str, np.ndarray]:
+    """Out-of-balance of an equilibrium: joint moments (N m) and span bends (deg).
+
+    ``joint_nm``: spring - finger gravity - actuator gravity - actuator moment,
+    recomputed from the pose; ``span_deg``: the unit model's bend of each span
+    under the carried moment (called directly) minus the joint angle.
+    """
+    f = model.finger
+    th = eq.joint_angles_deg
+    spring = np.array([float(sp.moment_nm(t)) for sp, t in zip(f.springs, th)])
+    joint = spring - gravity_moments_nm(f, th) - actuator_gravity_moments_nm(model, th) - eq.actuator_moments_nm
+    _, span = _span_angles_deg(model, eq.pressures_kpa, eq.actuator_moments_nm)
+    return {"joint_nm": joint, "span_deg": span - th}
+
+
+# --------------------------------------------------------------------------
+# Planning
+# --------------------------------------------------------------------------
+@dataclass
+class Plan:
+    """Planned pressures for one exercise and what the forward model predicts.
+
+    ``required_moments_nm``: the span moments that hold the target pose (the
+    Table-7-like unit moment targets); ``target_unit_angles_deg``: per group,
+    the unit angle at the target pose under the planned pressures.
+    """
+
+    exercise: str
+    target_deg: np.ndarray
+    pressures_kpa: np.ndarray
+    equilibrium: Equilibrium
+    achieved: bool
+    reason: str
+    required_moments_nm: np.ndarray
+    target_unit_angles_deg: np.ndarray
+    n_forward: int
+
+
+def _expand(z: np.ndarray, tie: bool, p_max: float) -> np.ndarray:
+    """Normalised decision variables in [0, 1] -> eight pressures (kPa)."""
+    z = np.clip(np.asarray(z, float), 0.0, 1.0)
+    if tie:
+        z = np.concatenate([z[0:2], z])  # CMC copies MCP
+    return p_max * z
+
+
+def _span_plan(model, joint: int, m_req: float, target: float, goal: float, p_max: float,
+               tie: bool) -> tuple[dict[int, float], float]:
+    """Least-squares-pressure variables of one span (indices into the 8 pressures)."""
+    groups = [GROUPS.index(g) for g in SPANS[JOINTS[joint]]]
+    idx = [2 * g + c for g in groups for c in (0, 1)]
+    if tie and joint == 0:
+        idx = [2, 3]  # MCP's pair drives CMC too
+
+    def bend(zs):
+        p8 = np.zeros(8)
+        p8[idx] = p_max * np.clip(zs, 0, 1)
+        if tie and joint == 0:
+            p8[0:2] = p8[2:4]
+        _, span = _span_angles_deg(model, p8, np.full(3, m_req))
+        return span[joint] - target
+
+    k = len(idx)
+    starts = [np.zeros(k), np.tile([0.5, 0.0], k // 2), np.tile([0.0, 0.5], k // 2)]
+    best, best_cost = None, np.inf
+    for z0 in starts:
+        if abs(bend(z0)) <= goal and not np.any(z0):
+            return dict.fromkeys(idx, 0.0), abs(bend(z0))
+        res = minimize(lambda z: float(z @ z), z0, jac=lambda z: 2 * z, method="SLSQP",
+                       bounds=[(0.0, 1.0)] * k,
+                       constraints=[{"type": "ineq", "fun": lambda z: goal - bend(z)},
+                                    {"type": "ineq", "fun": lambda z: goal + bend(z)}],
+                       options={"maxiter": 100, "ftol": 1e-10, "eps": 1e-6})
+        z = np.clip(res.x, 0, 1)
+        e = abs(bend(z))
+        cost = float(z @ z) if e <= goal + 1e-6 else 1e6 + e
+        if cost < best_cost:
+            best, best_cost = z, cost
+    if best_cost >= 1e6:
+        # Unreachable: the pressures that come closest.
+        from scipy.optimize import least_squares
+
+        sols = [least_squares(lambda z: [bend(z)], z0, bounds=(0, 1)) for z0 in starts[1:]]
+        best = min(sols, key=lambda s: abs(s.fun[0])).x
+    return dict(zip(idx, best)), abs(bend(best))
+
+
+def plan_exercise(
+    model: CascadeModel,
+    target_deg: Sequence[float],
+    *,
+    exercise: str = "",
+    tol_deg: float = 5.0,
+    active_limits_nm: Sequence[float] | None = None,
+    p_max_kpa: float = 300.0,
+    tie_cmc_mcp: bool = True,
+    margin_deg: float = 0.25,
+) -> Plan:
+    """Pressures for one exercise (see the module docstring)."""
+    target = np.asarray(target_deg, float)
+    limits = None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float))
+    goal = tol_deg - margin_deg
+    m_req, *_ = _required_moments(model, target)
+    # Step 1: per span, at the target pose (the paper's procedure).
+    p8 = np.zeros(8)
+    for j in range(3):
+        sol, _ = _span_plan(model, j, m_req[j], target[j], goal, p_max_kpa, tie_cmc_mcp)
+        for i, v in sol.items():
+            p8[i] = p_max_kpa * v
+    if tie_cmc_mcp:
+        p8[0:2] = p8[2:4]
+    n_fwd = 0
+    eq = solve_equilibrium(model, p8, x0_deg=target)
+    n_fwd += 1
+    ok = eq.converged and np.all(np.abs(eq.joint_angles_deg - target) <= tol_deg)
+    # Step 2: polish on the coupled model when the pose moved the moments.
+    if eq.converged and not ok and np.all(np.abs(_residual_at_target(model, p8, target, m_req)) <= goal + 1e-3):
+        nz = 6 if tie_cmc_mcp else 8
+        z0 = (p8[2:] if tie_cmc_mcp else p8) / p_max_kpa
+        cache: dict[tuple, Equilibrium] = {}
+
+        def fwd(z):
+            key = tuple(np.round(np.clip(z, 0, 1), 12))
+            if key not in cache:
+                cache[key] = solve_equilibrium(model, _expand(z, tie_cmc_mcp, p_max_kpa), x0_deg=target)
+            return cache[key]
+
+        cons = [{"type": "ineq", "fun": lambda z: goal - (fwd(z).joint_angles_deg - target)},
+                {"type": "ineq", "fun": lambda z: goal + (fwd(z).joint_angles_deg - target)}]
+        if limits is not None:
+            cons.append({"type": "ineq", "fun": lambda z: 1.0 - np.abs(fwd(z).actuator_moments_nm) / limits})
+        res = minimize(lambda z: float(z @ z), z0, jac=lambda z: 2 * z, method="SLSQP",
+                       bounds=[(0.0, 1.0)] * nz, constraints=cons,
+                       options={"maxiter": 100, "ftol": 1e-10, "eps": 1e-6})
+        n_fwd += len(cache)
+        eq2 = fwd(np.clip(res.x, 0, 1))
+        if eq2.converged and np.all(np.abs(eq2.joint_angles_deg - target) <= tol_deg):
+            p8, eq = _expand(np.clip(res.x, 0, 1), tie_cmc_mcp, p_max_kpa), eq2
+    if not (eq.converged and np.all(np.abs(eq.joint_angles_deg - target) <= tol_deg)):
+        # Unreachable as planned: the pressures that come closest on the
+        # coupled model (angle errors in units of the tolerance).
+        from scipy.optimize import least_squares
+
+        nz = 6 if tie_cmc_mcp else 8
+        z0 = (p8[2:] if tie_cmc_mcp else p8) / p_max_kpa
+
+        def errs(z):
+            e = solve_equilibrium(model, _expand(z, tie_cmc_mcp, p_max_kpa), x0_deg=target)
+            return np.concatenate([(e.joint_angles_deg - target) / tol_deg, 1e-3 * np.asarray(z)])
+
+        sol = least_squares(errs, z0, bounds=(0.0, 1.0), diff_step=1e-4, max_nfev=40 * nz)
+        n_fwd += int(sol.nfev) * (nz + 1)
+        p_ls = _expand(sol.x, tie_cmc_mcp, p_max_kpa)
+        eq_ls = solve_equilibrium(model, p_ls, x0_deg=target)
+        if eq_ls.converged and (not eq.converged or np.max(np.abs(eq_ls.joint_angles_deg - target))
+                                < np.max(np.abs(eq.joint_angles_deg - target))):
+            p8, eq = p_ls, eq_ls
+    err = eq.joint_angles_deg - target
+    reasons = []
+    if not eq.converged:
+        reasons.append(f"forward model did not converge ({STATUS_FLAGS[eq.status]})")
+    for j in np.flatnonzero(np.abs(err) > tol_deg):
+        groups = SPANS[JOINTS[j]]
+        at_bound = [PRESSURE_NAMES[2 * GROUPS.index(g) + c] for g in groups for c in (0, 1)
+                    if p8[2 * GROUPS.index(g) + c] >= p_max_kpa * (1 - 1e-6)]
+        reasons.append(
+            f"{JOINTS[j]} off target by {err[j]:+.1f} deg (tolerance {tol_deg:g} deg; "
+            f"needs {m_req[j]:.3g} N m over {'+'.join('LA_' + g for g in groups)})"
+            + (f", {', '.join(at_bound)} at the {p_max_kpa:g} kPa limit" if at_bound else ""))
+    if limits is not None:
+        for j in np.flatnonzero(np.abs(eq.actuator_moments_nm) > limits):
+            reasons.append(f"active safety limit exceeded at {JOINTS[j]} "
+                           f"({eq.actuator_moments_nm[j]:.3g} vs {limits[j]:.3g} N m)")
+    unit_target, _ = _span_angles_deg(model, p8, m_req)
+    return Plan(
+        exercise=exercise, target_deg=target, pressures_kpa=p8, equilibrium=eq,
+        achieved=not reasons, reason="; ".join(reasons), required_moments_nm=m_req,
+        target_unit_angles_deg=unit_target, n_forward=n_fwd,
+    )
+
+
+def _residual_at_target(model, p8, target, m_req):
+    _, span = _span_angles_deg(model, p8, m_req)
+    return span - target
