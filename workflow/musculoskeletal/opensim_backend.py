@@ -320,3 +320,80 @@ def scale_factors_of_run(scaling: xr.Dataset, run: int) -> dict[str, tuple[float
     """``{body: (sX, sY, sZ)}`` of one run of ``scaling.nc`` (var ``scale``, dims run, body, axis)."""
     sc = scaling["scale"].sel(run=run)
     return {b: tuple(float(sc.sel(body=b, axis=a)) for a in ("X", "Y", "Z")) for b in om.BODIES}
+
+
+# --- Path-level entry points of the Snakemake rules -------------------------------------------
+
+def _scaling_table(scaling_nc: str | Path) -> xr.Dataset:
+    with xr.open_dataset(scaling_nc) as s:
+        return s.load()
+
+
+def reference_scale_factors(scaling: xr.Dataset, marker: str = "Original") -> dict[str, tuple[float, float, float]]:
+    """Scale factors of the run labelled ``marker`` (the centre point: the mean finger)."""
+    markers = [str(m) for m in scaling["marker"].values]
+    if marker not in markers:
+        raise ValueError(f"no run with marker {marker!r} in the scaling table (markers: {markers})")
+    return scale_factors_of_run(scaling, int(scaling["run"].values[markers.index(marker)]))
+
+
+def write_reference_model(
+    parameters: str | Path,
+    scaling_nc: str | Path,
+    out: str | Path,
+    *,
+    fingers: Sequence[str],
+    reference_marker: str = "Original",
+) -> Path:
+    """Rule ``opensim_model``: the reference ``.osim`` (mean finger / the reference run's factors)."""
+    params = om.load_parameters(parameters)
+    ref = reference_scale_factors(_scaling_table(scaling_nc), reference_marker)
+    path = om.write_model(params, out, fingers, ref)
+    log.info("wrote %s (fingers %s, reference factors %s)", path, list(fingers), ref)
+    return path
+
+
+def write_run(
+    model_path: str | Path,
+    scaling_nc: str | Path,
+    run: int,
+    out: str | Path,
+    *,
+    fingers: Sequence[str],
+    angle_step_deg: float,
+    activations: Sequence[float],
+    include_gravity: bool,
+    rule: str,
+    config_slice: Any,
+) -> xr.Dataset:
+    """Rule ``opensim_sample``: one CCD run's moment-angle curves -> ``run{run}.nc``."""
+    from workflow.provenance import write_dataset
+
+    scaling = _scaling_table(scaling_nc)
+    factors = scale_factors_of_run(scaling, int(run))
+    ds = sample_run(model_path, factors, int(run), fingers, angle_grid(angle_step_deg), activations, include_gravity)
+    marker = str(scaling["marker"].sel(run=int(run)).values)
+    ds = ds.assign_coords(marker=marker)
+    n_fail = int((ds["status"] == 1).sum())
+    log.info("run %s (%s): %d samples in %.2f s, %d failed equilibria", run, marker,
+             int((ds["status"] == 0).sum()), float(ds["wall_time_s"]), n_fail)
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title=f"OpenSim finger moments, CCD run {run} ({marker})",
+                  source="finger-rehab-workflow generated OpenSim finger model (opensim backend)")
+    return ds
+
+
+def write_merged(run_files: Sequence[str | Path], out: str | Path, *, rule: str, config_slice: Any) -> xr.Dataset:
+    """Rule ``opensim_merge``: the per-run files -> ``moments_opensim.nc`` (``moments.nc`` layout)."""
+    from workflow.provenance import write_dataset
+
+    parts = []
+    for f in run_files:
+        with xr.open_dataset(f) as d:
+            parts.append(d.load())
+    ds = merge_runs(parts)
+    ds.attrs["backend"] = "opensim"
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title="Joint moments at the CCD runs (OpenSim backend, generated finger model)",
+                  source="finger-rehab-workflow generated OpenSim finger model (opensim backend)")
+    return ds
