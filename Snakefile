@@ -16,6 +16,7 @@ report: "report/workflow.rst"
 include: "rules/common.smk"
 include: "rules/doe.smk"
 include: "rules/musculoskeletal.smk"
+include: "rules/opensim.smk"
 
 
 rule all:
