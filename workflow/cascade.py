@@ -37,11 +37,12 @@ static equilibrium that can be solved for any pressures:
 
 Planning: per exercise, the moments the actuator must supply at the target pose
 follow directly (``m*_X = spring_X(theta*_X) - G_X(theta*)``, the paper's Table 7
-logic); per span, the pressures of least sum of squares whose span bend under
-``m*_X`` lies within ``tol - margin`` of the target; then an SLSQP polish on
-the coupled forward model with the angle tolerance and the active safety
-limits (``|m_X| <= limit_X``) as constraints (CLARIFICATIONS 16).  ``P_CMC`` may
-be tied to ``P_MCP`` as in all the paper's plans.
+logic).  Per span, a grid search (no gradients, so piecewise-constant
+surrogates such as KNN work) finds the pressures of least sum of squares
+(CLARIFICATIONS 16) whose bend under ``m*_X`` lies within ``tol - margin`` of the
+target; the coupled forward model then checks the pose, the angle tolerance and
+the active safety limits (``|m_X| <= limit_X``), halving the span goal when the
+pose drifts out.  ``P_CMC`` may be tied to ``P_MCP`` as in all the paper's plans.
 
 The unit response object is injected: anything with vectorised
 ``angle_deg(p_top_kpa, p_bottom_kpa, m_ext_nm)``, ``free_angle_deg(p_top, p_bottom)``
@@ -57,7 +58,7 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
-from scipy.optimize import minimize, root
+from scipy.optimize import root
 
 from workflow.finger import JOINTS, Finger, gravity_moments_nm
 
@@ -471,56 +472,57 @@ class Plan:
     reason: str
     required_moments_nm: np.ndarray
     target_unit_angles_deg: np.ndarray
-    n_forward: int
-
-
-def _expand(z: np.ndarray, tie: bool, p_max: float) -> np.ndarray:
-    """Normalised decision variables in [0, 1] -> eight pressures (kPa)."""
-    z = np.clip(np.asarray(z, float), 0.0, 1.0)
-    if tie:
-        z = np.concatenate([z[0:2], z])  # CMC copies MCP
-    return p_max * z
 
 
 def _span_plan(model, joint: int, m_req: float, target: float, goal: float, p_max: float,
-               tie: bool) -> tuple[dict[int, float], float]:
-    """Least-squares-pressure variables of one span (indices into the 8 pressures)."""
+               tie: bool, n_coarse: int = 61) -> tuple[dict[int, float], float]:
+    """Least-squares pressures of one span by grid search (no gradients, so a
+    piecewise-constant surrogate such as KNN works too).
+
+    Returns {index into the eight pressures: kPa} and the bend error (deg) at
+    the target pose.  Feasible: the least sum of squares with
+    ``|bend - target| <= goal``; otherwise the pressures closest to the target.
+    """
     groups = [GROUPS.index(g) for g in SPANS[JOINTS[joint]]]
     idx = [2 * g + c for g in groups for c in (0, 1)]
     if tie and joint == 0:
         idx = [2, 3]  # MCP's pair drives CMC too
-
-    def bend(zs):
-        p8 = np.zeros(8)
-        p8[idx] = p_max * np.clip(zs, 0, 1)
-        if tie and joint == 0:
-            p8[0:2] = p8[2:4]
-        _, span = _span_angles_deg(model, p8, np.full(3, m_req))
-        return span[joint] - target
-
     k = len(idx)
-    starts = [np.zeros(k), np.tile([0.5, 0.0], k // 2), np.tile([0.0, 0.5], k // 2)]
-    best, best_cost = None, np.inf
-    for z0 in starts:
-        if abs(bend(z0)) <= goal and not np.any(z0):
-            return dict.fromkeys(idx, 0.0), abs(bend(z0))
-        res = minimize(lambda z: float(z @ z), z0, jac=lambda z: 2 * z, method="SLSQP",
-                       bounds=[(0.0, 1.0)] * k,
-                       constraints=[{"type": "ineq", "fun": lambda z: goal - bend(z)},
-                                    {"type": "ineq", "fun": lambda z: goal + bend(z)}],
-                       options={"maxiter": 100, "ftol": 1e-10, "eps": 1e-6})
-        z = np.clip(res.x, 0, 1)
-        e = abs(bend(z))
-        cost = float(z @ z) if e <= goal + 1e-6 else 1e6 + e
-        if cost < best_cost:
-            best, best_cost = z, cost
-    if best_cost >= 1e6:
-        # Unreachable: the pressures that come closest.
-        from scipy.optimize import least_squares
+    counts = model.span_counts()[joint]
+    comp = np.rad2deg(_strap_compliance(model)[joint] * m_req)
 
-        sols = [least_squares(lambda z: [bend(z)], z0, bounds=(0, 1)) for z0 in starts[1:]]
-        best = min(sols, key=lambda s: abs(s.fun[0])).x
-    return dict(zip(idx, best)), abs(bend(best))
+    def bend(P):  # P (n, k) kPa -> span bend error (n,)
+        p8 = np.zeros((P.shape[0], 8))
+        p8[:, idx] = P
+        if tie and joint == 0:
+            p8[:, 0:2] = p8[:, 2:4]
+        out = np.full(P.shape[0], comp - target)
+        for g in range(4):
+            if counts[g]:
+                th = model.unit.angle_deg(p8[:, 2 * g], p8[:, 2 * g + 1], np.full(P.shape[0], m_req))
+                out += counts[g] * np.asarray(th, float)
+        return out
+
+    def search(lo, hi, n):
+        axes = [np.linspace(l, h, n) for l, h in zip(lo, hi)]
+        P = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, k)
+        e = bend(P)
+        ok = np.abs(e) <= goal
+        if np.any(ok):
+            i = np.flatnonzero(ok)[np.argmin(np.sum(P[ok] ** 2, axis=1))]
+            return P[i], float(e[i]), True
+        i = int(np.lexsort((np.sum(P**2, axis=1), np.round(np.abs(e), 9)))[0])
+        return P[i], float(e[i]), False
+
+    n = n_coarse if k == 2 else max(9, int(round(n_coarse ** 0.5)))
+    step = p_max / (n - 1)
+    P, e, feas = search(np.zeros(k), np.full(k, p_max), n)
+    for _ in range(3):  # refine around the best point
+        lo, hi = np.maximum(P - step, 0.0), np.minimum(P + step, p_max)
+        n_f = 21 if k == 2 else 7
+        P, e, feas = search(lo, hi, n_f)
+        step = step * 2 / (n_f - 1)
+    return dict(zip(idx, P)), e
 
 
 def plan_exercise(
@@ -533,66 +535,52 @@ def plan_exercise(
     p_max_kpa: float = 300.0,
     tie_cmc_mcp: bool = True,
     margin_deg: float = 0.25,
+    max_rounds: int = 5,
 ) -> Plan:
-    """Pressures for one exercise (see the module docstring)."""
+    """Pressures for one exercise (see the module docstring).
+
+    Per span, the least-squares pressures whose bend under the target-pose
+    moment is within ``tol - margin`` of the target; then the coupled forward
+    model checks the pose.  If a joint lands outside the tolerance (the pose,
+    not the target, sets the moments), the span goal is halved and the plan
+    repeated, at most ``max_rounds`` times.
+    """
     target = np.asarray(target_deg, float)
     limits = None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float))
-    goal = tol_deg - margin_deg
     m_req, *_ = _required_moments(model, target)
-    # Step 1: per span, at the target pose (the paper's procedure).
-    p8 = np.zeros(8)
-    for j in range(3):
-        sol, _ = _span_plan(model, j, m_req[j], target[j], goal, p_max_kpa, tie_cmc_mcp)
-        for i, v in sol.items():
-            p8[i] = p_max_kpa * v
-    if tie_cmc_mcp:
-        p8[0:2] = p8[2:4]
-    n_fwd = 0
-    eq = solve_equilibrium(model, p8, x0_deg=target)
-    n_fwd += 1
-    ok = eq.converged and np.all(np.abs(eq.joint_angles_deg - target) <= tol_deg)
-    # Step 2: polish on the coupled model when the pose moved the moments.
-    if eq.converged and not ok and np.all(np.abs(_residual_at_target(model, p8, target, m_req)) <= goal + 1e-3):
-        nz = 6 if tie_cmc_mcp else 8
-        z0 = (p8[2:] if tie_cmc_mcp else p8) / p_max_kpa
-        cache: dict[tuple, Equilibrium] = {}
-
-        def fwd(z):
-            key = tuple(np.round(np.clip(z, 0, 1), 12))
-            if key not in cache:
-                cache[key] = solve_equilibrium(model, _expand(z, tie_cmc_mcp, p_max_kpa), x0_deg=target)
-            return cache[key]
-
-        cons = [{"type": "ineq", "fun": lambda z: goal - (fwd(z).joint_angles_deg - target)},
-                {"type": "ineq", "fun": lambda z: goal + (fwd(z).joint_angles_deg - target)}]
-        if limits is not None:
-            cons.append({"type": "ineq", "fun": lambda z: 1.0 - np.abs(fwd(z).actuator_moments_nm) / limits})
-        res = minimize(lambda z: float(z @ z), z0, jac=lambda z: 2 * z, method="SLSQP",
-                       bounds=[(0.0, 1.0)] * nz, constraints=cons,
-                       options={"maxiter": 100, "ftol": 1e-10, "eps": 1e-6})
-        n_fwd += len(cache)
-        eq2 = fwd(np.clip(res.x, 0, 1))
-        if eq2.converged and np.all(np.abs(eq2.joint_angles_deg - target) <= tol_deg):
-            p8, eq = _expand(np.clip(res.x, 0, 1), tie_cmc_mcp, p_max_kpa), eq2
-    if not (eq.converged and np.all(np.abs(eq.joint_angles_deg - target) <= tol_deg)):
-        # Unreachable as planned: the pressures that come closest on the
-        # coupled model (angle errors in units of the tolerance).
-        from scipy.optimize import least_squares
-
-        nz = 6 if tie_cmc_mcp else 8
-        z0 = (p8[2:] if tie_cmc_mcp else p8) / p_max_kpa
-
-        def errs(z):
-            e = solve_equilibrium(model, _expand(z, tie_cmc_mcp, p_max_kpa), x0_deg=target)
-            return np.concatenate([(e.joint_angles_deg - target) / tol_deg, 1e-3 * np.asarray(z)])
-
-        sol = least_squares(errs, z0, bounds=(0.0, 1.0), diff_step=1e-4, max_nfev=40 * nz)
-        n_fwd += int(sol.nfev) * (nz + 1)
-        p_ls = _expand(sol.x, tie_cmc_mcp, p_max_kpa)
-        eq_ls = solve_equilibrium(model, p_ls, x0_deg=target)
-        if eq_ls.converged and (not eq.converged or np.max(np.abs(eq_ls.joint_angles_deg - target))
-                                < np.max(np.abs(eq.joint_angles_deg - target))):
-            p8, eq = p_ls, eq_ls
+    goal = tol_deg - margin_deg
+    # Pose at which the span moments are evaluated: the target, except for
+    # joints whose span cannot reach it -- those stay where the forward model
+    # puts them, so the other spans plan for the moments they will really see.
+    theta_eval = target.copy()
+    best = None
+    for _ in range(max_rounds):
+        m_eval, *_ = _required_moments(model, theta_eval)
+        p8 = np.zeros(8)
+        span_err = np.zeros(3)
+        for j in range(3):
+            sol, span_err[j] = _span_plan(model, j, m_eval[j], target[j],
+                                          goal, p_max_kpa, tie_cmc_mcp)
+            for i, v in sol.items():
+                p8[i] = v
+        if tie_cmc_mcp:
+            p8[0:2] = p8[2:4]
+        eq = solve_equilibrium(model, p8, x0_deg=theta_eval)
+        e = np.abs(eq.joint_angles_deg - target) if eq.converged else np.full(3, np.inf)
+        score = (int(np.sum(e > tol_deg)), float(np.sum(e)))
+        if best is None or score < best[2]:
+            best = (p8, eq, score)
+        if score[0] == 0 or not eq.converged:
+            break
+        unreachable = np.abs(span_err) > goal
+        if np.any(unreachable):
+            new_eval = np.where(unreachable, eq.joint_angles_deg, target)
+            if np.max(np.abs(new_eval - theta_eval)) < 0.1:
+                break
+            theta_eval = new_eval
+        else:
+            goal *= 0.5
+    p8, eq, _ = best
     err = eq.joint_angles_deg - target
     reasons = []
     if not eq.converged:
@@ -613,10 +601,5 @@ def plan_exercise(
     return Plan(
         exercise=exercise, target_deg=target, pressures_kpa=p8, equilibrium=eq,
         achieved=not reasons, reason="; ".join(reasons), required_moments_nm=m_req,
-        target_unit_angles_deg=unit_target, n_forward=n_fwd,
+        target_unit_angles_deg=unit_target,
     )
-
-
-def _residual_at_target(model, p8, target, m_req):
-    _, span = _span_angles_deg(model, p8, m_req)
-    return span - target
