@@ -392,6 +392,10 @@ def write_merged(run_files: Sequence[str | Path], out: str | Path, *, rule: str,
         with xr.open_dataset(f) as d:
             parts.append(d.load())
     ds = merge_runs(parts)
+    # Encodings read from the per-run files (e.g. a 2-character string width for
+    # the marker "DM") must not constrain the merged file.
+    for v in ds.variables.values():
+        v.encoding = {}
     ds.attrs["backend"] = "opensim"
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title="Joint moments at the CCD runs (OpenSim backend, generated finger model)",
