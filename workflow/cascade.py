@@ -82,6 +82,10 @@ __all__ = [
     "plan_exercise",
     "pressures_vector",
     "pressures_table",
+    "backbone_polyline",
+    "plan_patient",
+    "plans_dataset",
+    "write_cascade_plan",
 ]
 
 GROUPS = ("CMC", "MCP", "PIP", "DIP")
@@ -603,3 +607,160 @@ def plan_exercise(
         achieved=not reasons, reason="; ".join(reasons), required_moments_nm=m_req,
         target_unit_angles_deg=unit_target,
     )
+
+
+# --------------------------------------------------------------------------
+# Patient plans as a dataset, and the rule's file-level entry point
+# --------------------------------------------------------------------------
+def plan_patient(model: CascadeModel, targets: Mapping[str, Sequence[float]], **kw) -> list[Plan]:
+    """:func:`plan_exercise` for every exercise of ``targets`` ({name: (MCP, PIP, DIP) deg})."""
+    return [plan_exercise(model, t, exercise=name, **kw) for name, t in targets.items()]
+
+
+def plans_dataset(model: CascadeModel, plans: Sequence[Plan], *, tol_deg: float,
+                  active_limits_nm: Sequence[float] | None, notes: Mapping[str, str] | None = None):
+    """The contract's ``cascade_plan.nc`` content (without provenance)."""
+    import xarray as xr
+
+    ex = [p.exercise for p in plans]
+    droop = solve_equilibrium(model, np.zeros(8))
+    flag_vals = np.array(sorted(STATUS_FLAGS), dtype="i1")
+    lim = np.full(3, np.nan) if active_limits_nm is None else np.asarray(active_limits_nm, float)
+    eqs = [p.equilibrium for p in plans]
+    ds = xr.Dataset(
+        {
+            "pressure_kpa": (("exercise", "group", "chamber"), np.array([pressures_table(p.pressures_kpa) for p in plans]),
+                             {"units": "kPa", "long_name": "planned chamber pressure"}),
+            "target_angle_deg": (("exercise", "joint"), np.array([p.target_deg for p in plans]),
+                                 {"units": "degree", "long_name": "target joint angle (Table 1)"}),
+            "predicted_angle_deg": (("exercise", "joint"), np.array([e.joint_angles_deg for e in eqs]),
+                                    {"units": "degree", "long_name": "joint angle at equilibrium under the planned pressures"}),
+            "angle_error_deg": (("exercise", "joint"), np.array([e.joint_angles_deg - p.target_deg for e, p in zip(eqs, plans)]),
+                                {"units": "degree", "long_name": "predicted minus target joint angle"}),
+            "achieved": ("exercise", np.array([p.achieved for p in plans]),
+                         {"long_name": f"every joint within {tol_deg:g} deg of its target, moments within the active limits"}),
+            "reason": ("exercise", np.array([p.reason for p in plans], dtype=object),
+                       {"long_name": "why the exercise is not reached (empty if reached)"}),
+            "status": ("exercise", np.array([e.status for e in eqs], dtype="i1"),
+                       {"long_name": "forward-solve status", "flag_values": flag_vals,
+                        "flag_meanings": " ".join(STATUS_FLAGS[int(v)] for v in flag_vals)}),
+            "actuator_moment_nm": (("exercise", "joint"), np.array([e.actuator_moments_nm for e in eqs]),
+                                   {"units": "N m", "long_name": "flexion moment the actuator applies about the joint at equilibrium"}),
+            "required_moment_nm": (("exercise", "joint"), np.array([p.required_moments_nm for p in plans]),
+                                   {"units": "N m", "long_name": "moment per unit of the joint's span that holds the target pose (Table 7-like)"}),
+            "unit_target_angle_deg": (("exercise", "group"), np.array([p.target_unit_angles_deg for p in plans]),
+                                      {"units": "degree", "long_name": "unit bending angle at the target pose under the planned pressures (Table 7-like)"}),
+            "unit_angle_deg": (("exercise", "group"), np.array([e.unit_angles_deg for e in eqs]),
+                               {"units": "degree", "long_name": "unit bending angle at equilibrium"}),
+            "unit_moment_nm": (("exercise", "group"), np.array([e.unit_moments_nm for e in eqs]),
+                               {"units": "N m", "long_name": "bending moment each unit carries at equilibrium"}),
+            "strap_force_n": (("exercise", "strap"), np.array([e.strap_forces_n for e in eqs]),
+                              {"units": "N", "long_name": "strap force transmitting the span moment (positive: pulls into flexion)"}),
+            "sum_sq_pressure_kpa2": ("exercise", np.array([float(p.pressures_kpa @ p.pressures_kpa) for p in plans]),
+                                     {"units": "kPa2", "long_name": "objective: sum of squared pressures"}),
+            "active_limit_nm": ("joint", lim, {"units": "N m", "long_name": "active safety limit"}),
+            "droop_angle_deg": ("joint", droop.joint_angles_deg,
+                                {"units": "degree", "long_name": "joint angle at zero pressure (gravity droop with the actuator on)"}),
+            "units_per_group": ("group", np.array([model.n_per_group[g] for g in GROUPS], dtype="i4"),
+                                {"units": "1", "long_name": "actuator units per group"}),
+            "segment_mass_kg": ("segment", model.finger.masses_kg, {"units": "kg", "long_name": "phalanx mass"}),
+        },
+        coords={"exercise": ex, "group": list(GROUPS), "chamber": list(CHAMBERS), "joint": list(JOINTS),
+                "strap": ["PIP", "DIP"], "segment": ["PP", "MP", "DP"]},
+    )
+    ds.attrs.update({
+        "unit_mass_kg": model.unit_mass_kg,
+        "unit_length_mm": model.unit_length_m * 1e3,
+        "spans": "; ".join(f"{j}: {'+'.join(g)}" for j, g in SPANS.items()),
+        "finger_mass_source": model.finger.mass_source,
+        "droop_converged": int(droop.converged),
+        **dict(notes or {}),
+    })
+    return ds
+
+
+def write_cascade_plan(
+    patient_name: str,
+    patient: Mapping[str, Any],
+    unit: Any,
+    *,
+    ccd_nc: str,
+    moments_nc: str,
+    joint_loads_nc: str,
+    out_nc: str,
+    out_png: str | None,
+    cascade_cfg: Mapping[str, Any],
+    anthropometry: Mapping[str, Any],
+    config_slice: Any,
+    rule: str = "cascade_plan",
+):
+    """Build the patient's finger and actuator, plan every exercise, write the plan (and poses plot).
+
+    ``unit`` is the unit response object (see :class:`UnitResponse`);
+    ``cascade_cfg`` the config's ``cascade`` section.
+    """
+    import logging
+    import time
+
+    import xarray as xr
+
+    from workflow import finger as F
+    from workflow.provenance import write_dataset
+
+    log = logging.getLogger(__name__)
+    c = cascade_cfg
+    loads = xr.load_dataset(joint_loads_nc)
+    moments = xr.load_dataset(moments_nc)
+    ccd = xr.load_dataset(ccd_nc)
+    finger_name = str(patient.get("finger", "F3"))
+    coded = {d: float(v) for d, v in zip(loads["dimension"].values, loads["x"].values)}
+    measures = anthropometry["measures"]
+    dims = F.patient_dimensions_mm(measures, coded, float(anthropometry.get("coded_unit_sd", 1.0)),
+                                   patient.get("measurements_mm"))
+    # Shape of the passive curves: the design centre's, where a backend sampled more than the targets.
+    centre = ccd["run"].values[[str(m) == "Original" for m in ccd["marker"].values]]
+    curve = None
+    if centre.size and finger_name in moments["finger"].values:
+        mm = moments["moment_nm"].sel(run=centre[0], finger=finger_name)
+        mm = mm.sel(activation=mm["activation"].values[np.argmin(mm["activation"].values)])
+        curve = (moments["angle_deg"].values, mm.transpose("joint", "angle_deg").sel(joint=list(JOINTS)).values)
+    springs, spring_note = F.springs_from_loads(
+        loads["target_angle_deg"].sel(joint=list(JOINTS)).values,
+        loads["passive_moment_nm"].sel(joint=list(JOINTS)).values,
+        *(curve if curve is not None else (None, None)))
+    d = c["densities"]
+    fing = F.build_finger(
+        dims, springs,
+        {k: d[k] for k in ("flesh_proximal", "flesh_middle", "flesh_distal", "bone")},
+        gravity_m_s2=c["gravity_m_s2"], section_points=c.get("section_points"),
+        reference_dims_mm={k: float(v["mean"]) for k, v in measures.items()},
+    )
+    model = build_cascade(
+        fing, unit, actuator_dims_mm=c["unit_geometry_mm"], silicone_density=d["silicone"],
+        paper_density=d["paper"], cmc_length_fraction=c["cmc_length_fraction"], tip_units=c["tip_units"],
+        units_per_group=c.get("units_per_group") or None, strap_stiffness_n_per_m=c["strap_stiffness_n_per_m"],
+    )
+    limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
+    targets = {str(e): loads["target_angle_deg"].sel(exercise=e, joint=list(JOINTS)).values
+               for e in loads["exercise"].values}
+    log.info("patient %s: units per group %s, finger masses %s kg (%s); springs: %s", patient_name,
+             model.n_per_group, np.round(fing.masses_kg, 4), fing.mass_source, spring_note)
+    t0 = time.perf_counter()
+    plans = []
+    for name, t in targets.items():
+        p = plan_exercise(model, t, exercise=name, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
+                          p_max_kpa=c["p_max_kpa"], tie_cmc_mcp=c["tie_cmc_mcp"], margin_deg=c["margin_deg"])
+        log.info("%s: %s pressures %s kPa, predicted %s deg (target %s) %s", name,
+                 "reached" if p.achieved else "NOT reached", np.round(p.pressures_kpa, 1),
+                 np.round(p.equilibrium.joint_angles_deg, 1), t, p.reason)
+        plans.append(p)
+    ds = plans_dataset(model, plans, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
+                       notes={"patient": patient_name, "finger": finger_name, "springs": spring_note,
+                              "planning_wall_time_s": round(time.perf_counter() - t0, 3)})
+    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
+                  title=f"Cascade pressure plan of patient {patient_name}")
+    if out_png:
+        from workflow.plots_cascade import plot_poses
+
+        plot_poses(model, plans, out_png, title=f"patient {patient_name}")
+    return ds

@@ -49,6 +49,7 @@ __all__ = [
     "build_finger",
     "gravity_moments_nm",
     "gravity_droop_deg",
+    "springs_from_loads",
 ]
 
 JOINTS = ("MCP", "PIP", "DIP")
@@ -442,3 +443,50 @@ def gravity_droop_deg(finger: Finger, x0: Sequence[float] | None = None) -> tupl
 
     sol = root(resid, np.zeros(3) if x0 is None else np.asarray(x0, float), method="hybr", tol=1e-12)
     return np.asarray(sol.x), bool(sol.success)
+
+
+def springs_from_loads(
+    target_angle_deg: np.ndarray,
+    passive_moment_nm: np.ndarray,
+    curve_angle_deg: np.ndarray | None = None,
+    curve_moment_nm: np.ndarray | None = None,
+) -> tuple[list[JointSpring], str]:
+    """The patient's three passive springs from the musculoskeletal stage.
+
+    Parameters
+    ----------
+    target_angle_deg, passive_moment_nm : (exercise, joint) arrays of
+        ``joint_loads.nc``: the patient's passive moment at each target angle.
+    curve_angle_deg, curve_moment_nm : optional full passive curve per joint
+        at the design centre, ``(angle,)`` and ``(joint, angle)`` (NaN where not
+        sampled), e.g. ``moments.nc`` of the OpenSim backend.  A joint with at
+        least three samples above 0 deg takes that curve's shape, scaled so it
+        passes through the patient's moment at the joint's largest target angle
+        ("scaled to the patient"); otherwise the patient's points alone.
+
+    Returns the springs (MCP, PIP, DIP) and a note of the source per joint.
+    """
+    springs, notes = [], []
+    for j, joint in enumerate(JOINTS):
+        a = np.asarray(target_angle_deg, float)[:, j]
+        m = np.asarray(passive_moment_nm, float)[:, j]
+        ok = np.isfinite(a) & np.isfinite(m) & (a > 0)
+        a, m = a[ok], m[ok]
+        used = False
+        if curve_angle_deg is not None and curve_moment_nm is not None and a.size:
+            ca = np.asarray(curve_angle_deg, float)
+            cm = np.asarray(curve_moment_nm, float)[j]
+            sel = np.isfinite(cm) & (ca > 0)
+            if np.count_nonzero(sel) >= 3:
+                k = int(np.argmax(a))
+                ref = float(np.interp(a[k], ca[sel], cm[sel]))
+                if ref > 0:
+                    springs.append(JointSpring.from_points(ca[sel], cm[sel] * m[k] / ref))
+                    notes.append(f"{joint}: curve shape scaled to the patient at {a[k]:g} deg")
+                    used = True
+        if not used:
+            if a.size == 0:
+                raise ValueError(f"no passive moment above 0 deg for {joint}: cannot build its spring")
+            springs.append(JointSpring.from_points(a, m))
+            notes.append(f"{joint}: patient points at {sorted(set(a.tolist()))} deg and 0")
+    return springs, "; ".join(notes)

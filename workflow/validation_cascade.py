@@ -1,0 +1,128 @@
+"""Our planned pressures for the mean finger against the paper's Tables 8 and 10.
+
+Per pressure (eight per exercise) the absolute error in kPa and the relative
+error where the reference is at least ``rel_floor_kpa`` (10 kPa,
+CLARIFICATIONS 17); the exercises we reach against each of the paper's three
+sets separately (CLARIFICATIONS 18): planned in 3D (Table 8: all five), reached
+in its 2D finger-actuator FEA (TGE1-3), reached on the dummy finger (Table 10:
+TGE1-2).  Agreement with Table 8 is indicative only: the paper summed unit
+moments along the chain (CLARIFICATIONS 16), and Table 10 was measured on a PLA
+dummy finger (CLARIFICATIONS 17).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from workflow.cascade import PRESSURE_NAMES
+
+__all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "write_cascade_validation", "plot_validation"]
+
+#: Exercises the paper reached, per set (CLARIFICATIONS 18).
+PAPER_REACHED: Mapping[str, Sequence[str]] = {
+    "planned_3d": ("TGE1", "TGE2", "TGE3", "TGE4", "TGE5"),
+    "fea_2d": ("TGE1", "TGE2", "TGE3"),
+    "dummy": ("TGE1", "TGE2"),
+}
+
+
+def read_pressure_table(path: str | Path) -> pd.DataFrame:
+    """A paper pressure table (kPa), indexed by exercise, columns :data:`PRESSURE_NAMES`."""
+    df = pd.read_csv(path).set_index("exercise")
+    missing = [c for c in PRESSURE_NAMES if c not in df.columns]
+    if missing:
+        raise ValueError(f"{path}: missing columns {missing}")
+    return df[list(PRESSURE_NAMES)].astype(float)
+
+
+def compare_pressures(plan: xr.Dataset, references: Mapping[str, pd.DataFrame],
+                      rel_floor_kpa: float = 10.0) -> xr.Dataset:
+    """Errors of the plan's pressures against each reference table.
+
+    ``plan``: a ``cascade_plan.nc`` dataset; ``references``: {name: table},
+    the names becoming the ``table`` dimension.  Exercises missing from a
+    table are NaN there.
+    """
+    ex = [str(e) for e in plan["exercise"].values]
+    ours = plan["pressure_kpa"].sel(exercise=ex).values.reshape(len(ex), 8)
+    names = list(references)
+    ref = np.full((len(names), len(ex), 8), np.nan)
+    for r, name in enumerate(names):
+        tab = references[name]
+        for i, e in enumerate(ex):
+            if e in tab.index:
+                ref[r, i] = tab.loc[e].values
+    abs_err = np.abs(ours[None] - ref)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(ref >= rel_floor_kpa, abs_err / ref, np.nan)
+    achieved = np.asarray(plan["achieved"].values).astype(bool)
+    sets = list(PAPER_REACHED)
+    paper = np.array([[e in PAPER_REACHED[s] for e in ex] for s in sets])
+    agree = paper == achieved[None]
+    ds = xr.Dataset(
+        {
+            "ours": (("exercise", "pressure"), ours, {"units": "kPa", "long_name": "our planned pressure (mean finger)"}),
+            "reference": (("table", "exercise", "pressure"), ref, {"units": "kPa", "long_name": "paper's pressure"}),
+            "abs_error": (("table", "exercise", "pressure"), abs_err,
+                          {"units": "kPa", "long_name": "|ours - reference|"}),
+            "rel_error": (("table", "exercise", "pressure"), rel,
+                          {"units": "1", "long_name": f"|ours - reference| / reference (NaN where reference < {rel_floor_kpa:g} kPa)"}),
+            "mean_abs_error": (("table",), np.nanmean(abs_err.reshape(len(names), -1), axis=1),
+                               {"units": "kPa", "long_name": "mean absolute error over the table's cells"}),
+            "ours_achieved": (("exercise",), achieved, {"long_name": "exercise reached by our plan"}),
+            "paper_reached": (("paper_set", "exercise"), paper, {"long_name": "exercise reached in the paper's set"}),
+            "reached_agreement": (("paper_set",), agree.mean(axis=1),
+                                  {"units": "1", "long_name": "share of exercises where ours and the paper's set agree"}),
+        },
+        coords={"table": names, "exercise": ex, "pressure": list(PRESSURE_NAMES), "paper_set": sets},
+    )
+    ds.attrs["rel_floor_kpa"] = rel_floor_kpa
+    return ds
+
+
+def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
+    """Our pressures beside the paper's, one panel per exercise."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ex = list(ds["exercise"].values)
+    fig, axes = plt.subplots(1, len(ex), figsize=(3.0 * len(ex), 3.0), sharey=True, squeeze=False)
+    x = np.arange(8)
+    w = 0.8 / (1 + ds.sizes["table"])
+    for ax, e in zip(axes[0], ex):
+        ax.bar(x - 0.4 + w / 2, ds["ours"].sel(exercise=e), w, label="ours")
+        for k, r in enumerate(ds["table"].values):
+            ax.bar(x - 0.4 + w * (k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
+        reached = bool(ds["ours_achieved"].sel(exercise=e))
+        ax.set_title(f"{e} ({'reached' if reached else 'not reached'} by ours)", fontsize=8)
+        ax.set_xticks(x, [p[2:] for p in ds["pressure"].values], rotation=90, fontsize=6)
+        ax.tick_params(labelsize=6)
+    axes[0, 0].set_ylabel("pressure (kPa)", fontsize=7)
+    axes[0, 0].legend(fontsize=6)
+    fig.tight_layout()
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=130)
+    plt.close(fig)
+
+
+def write_cascade_validation(plan_nc: str | Path, tables: Mapping[str, str | Path], out_nc: str | Path, *,
+                             config_slice, rule: str = "validate_cascade", plot: str | Path | None = None,
+                             rel_floor_kpa: float = 10.0) -> xr.Dataset:
+    """Read the mean finger's plan and the paper's tables, write ``results/validation/cascade.nc``."""
+    from workflow.provenance import write_dataset
+
+    plan = xr.load_dataset(plan_nc)
+    ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa)
+    ds.attrs["patient"] = str(plan.attrs.get("patient", ""))
+    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
+                  title="Planned pressures against the paper's Tables 8 and 10")
+    if plot:
+        plot_validation(ds, plot)
+    return ds
