@@ -1,0 +1,55 @@
+# Stage cascade (issue 6): per-patient pressure plans on the reduced-order
+# finger-actuator model, and their comparison with the paper's Tables 8 and 10.
+
+
+rule cascade_plan:
+    input:
+        unit_response=get_unit_response(),
+        ccd="results/doe/ccd.nc",
+        moments="results/musculoskeletal/moments.nc",
+        joint_loads="results/patients/{patient}/joint_loads.nc",
+        code=code_files("cascade", "finger", "plots_cascade", "unit_model", "surrogates"),
+    output:
+        plan="results/patients/{patient}/cascade_plan.nc",
+        plot=report(
+            "results/patients/{patient}/cascade_poses.png",
+            caption="../report/cascade_poses.rst",
+            category="Cascade",
+            subcategory="{patient}",
+        ),
+    params:
+        patient=get_patient,
+        cascade=config["cascade"],
+        anthropometry=config["anthropometry"],
+        unit_model=config["surrogates"]["unit_model"],
+        config_slice=get_cascade_slice,
+    log:
+        "logs/cascade/cascade_plan/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/cascade_plan_{patient}.tsv"
+    script:
+        "../workflow/scripts/cascade_plan.py"
+
+
+rule validate_cascade:
+    input:
+        plan=get_validation_plan(),
+        table08="resources/table08_planned_pressures_3d.csv",
+        table10="resources/table10_experimental_pressures_mean_finger.csv",
+        code=code_files("validation_cascade", "cascade"),
+    output:
+        nc="results/validation/cascade.nc",
+        plot=report(
+            "results/validation/cascade.png",
+            caption="../report/cascade_validation.rst",
+            category="Cascade",
+        ),
+    params:
+        rel_floor_kpa=config["cascade"]["rel_floor_kpa"],
+        config_slice=cfg("cascade"),
+    log:
+        "logs/cascade/validate_cascade.log",
+    benchmark:
+        "results/benchmarks/rules/validate_cascade.tsv"
+    script:
+        "../workflow/scripts/cascade_validate.py"
