@@ -55,3 +55,25 @@ def moments_source():
 def get_patient(wildcards):
     """Param function: one patient's config entry."""
     return config["patients"][wildcards.patient]
+
+
+# --- Stage cascade (issue 6) ----------------------------------------------------
+def get_unit_response():
+    """Input: the surrogate the cascade plans with (config cascade.surrogate)."""
+    return f"results/actuator/surrogate_{config['cascade']['surrogate']}.joblib"
+
+
+def get_cascade_slice(wildcards):
+    """Param function: the config one patient's plan depends on (its hash goes into the outputs)."""
+    return {
+        "patient": {wildcards.patient: config["patients"][wildcards.patient]},
+        "anthropometry": config["anthropometry"],
+        "exercises": config["exercises"],
+        "cascade": config["cascade"],
+        "unit_model": config["surrogates"]["unit_model"],
+    }
+
+
+def get_validation_plan():
+    """Input: the plan compared with the paper's tables (the mean finger by default)."""
+    return f"results/patients/{config['cascade']['validation_patient']}/cascade_plan.nc"
