@@ -29,7 +29,10 @@ import pandas as pd
 import xarray as xr
 from scipy.optimize import brentq
 
-__all__ = ["MAPPING_STATUS", "GROUPS", "CHAMBERS", "map_pairs", "read_planned_pressures", "mapping_dataset"]
+from workflow.provenance import write_dataset
+
+__all__ = ["MAPPING_STATUS", "GROUPS", "CHAMBERS", "map_pairs", "read_planned_pressures", "mapping_dataset",
+           "write_mapping"]
 
 MAPPING_STATUS = {0: "mapped", 1: "equal_pressures", 2: "outside_2d_grid"}
 _REASONS = {
@@ -161,4 +164,26 @@ def mapping_dataset(
     ds.attrs["p_max_2d_kpa"] = float(p_max_2d_kpa)
     ds.attrs["p_max_3d_kpa"] = float(p_max_3d_kpa)
     ds.attrs["method"] = "scale s with theta_2D(s P_T, s P_B) = theta_3D(P_T, P_B), bracketing + Brent (CLARIFICATIONS 7)"
+    return ds
+
+
+def write_mapping(planned_csv: str | Path, surrogate_3d: str | Path, surrogate_2d: str | Path, out: str | Path, *,
+                  config_slice, rule: str = "mapping_2d3d", plot: str | Path | None = None) -> xr.Dataset:
+    """Map Table 8 with the fitted 3D and 2D surrogates -> ``mapping_2d3d.nc`` (and the Fig. 17-like plot).
+
+    The 2D grid's edge is the 2D surrogate's training range (its sweep's p_max).
+    """
+    from workflow.surrogates import load_surrogate
+
+    s3, s2 = load_surrogate(surrogate_3d), load_surrogate(surrogate_2d)
+    ds = mapping_dataset(read_planned_pressures(planned_csv), s3.angle_deg, s2.angle_deg,
+                         p_max_2d_kpa=s2.p_max_kpa, p_max_3d_kpa=s3.p_max_kpa)
+    ds.attrs["surrogate_3d"] = s3.regressor
+    ds.attrs["surrogate_2d"] = s2.regressor
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title="2D pressures of the same ratio and free angle as the planned 3D pressures (Table 8)")
+    if plot is not None:
+        from workflow.plots_actuator import plot_mapping
+
+        plot_mapping(ds, plot)
     return ds

@@ -42,6 +42,8 @@ from sklearn.neighbors import KNeighborsRegressor
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 
+from workflow.provenance import write_dataset
+
 __all__ = [
     "REGRESSORS",
     "TARGETS",
@@ -57,6 +59,8 @@ __all__ = [
     "fit_surrogate",
     "save_surrogate",
     "load_surrogate",
+    "write_surrogate_cv",
+    "write_surrogate",
 ]
 
 log = logging.getLogger(__name__)
@@ -322,3 +326,34 @@ def load_surrogate(path: str | Path) -> Surrogate:
 def as_callables(surrogate: Surrogate) -> tuple[Callable, Callable]:
     """(free_angle_deg, blocked_moment_nm) callables for `workflow.unit_model.UnitModel`."""
     return surrogate.angle_deg, surrogate.moment_nm
+
+
+def write_surrogate_cv(response_2d: str | Path, response_3d: str | Path, out: str | Path, *, k: int, folds: int,
+                       random_state: int, regressors: Sequence[str], config_slice, rule: str = "surrogate_cv",
+                       plot: str | Path | None = None) -> xr.Dataset:
+    """CV of the regressors on both sweeps -> ``surrogate_cv.nc`` (and the CV chart)."""
+    responses = {fea: xr.load_dataset(p) for fea, p in (("2d", response_2d), ("3d", response_3d))}
+    ds = surrogate_cv(responses, regressors=regressors, k=k, folds=folds, random_state=random_state)
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title="Cross-validation of surrogates of the unit's angle and moment over (P_T, P_B)")
+    if plot is not None:
+        from workflow.plots_actuator import plot_surrogate_cv
+
+        plot_surrogate_cv(ds, plot)
+    return ds
+
+
+def write_surrogate(response: str | Path, cv: str | Path, out: str | Path, *, fea: str, k: int, random_state: int,
+                    plot: str | Path | None = None) -> Surrogate:
+    """Fit the regressor the CV chose for ``fea`` on all its samples; save it (and the Fig. 11-like plot)."""
+    resp = xr.load_dataset(response)
+    with xr.open_dataset(cv) as c:
+        chosen = str(c["chosen"].sel(fea=fea).values)
+    s = fit_surrogate(resp, chosen, fea=fea, k=k, random_state=random_state)
+    log.info("%s: fitted %s on %d samples", fea, chosen, s.n_samples)
+    save_surrogate(s, out)
+    if plot is not None:
+        from workflow.plots_actuator import plot_response
+
+        plot_response(resp, s, plot, fea=fea)
+    return s

@@ -42,6 +42,8 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 import xarray as xr
 
+from workflow.provenance import write_dataset
+
 __all__ = [
     "STATUS_FLAGS",
     "SAMPLE_FIELDS",
@@ -51,6 +53,8 @@ __all__ = [
     "run_shard",
     "merge_shards",
     "make_solver",
+    "write_shard",
+    "write_response",
 ]
 
 log = logging.getLogger(__name__)
@@ -321,3 +325,37 @@ def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Seque
         f"make_solver({fea!r}): the FE solver of issue 4 (workflow.fem.solve_unit) is not wired into the "
         "sweep yet; replace the body of workflow.sweep.make_solver with a call to it"
     )
+
+
+def write_shard(out: str | Path, *, fea: str, shard: int, sweep_cfg: Mapping[str, Any],
+                actuator_cfg: Mapping[str, Any], config_slice: Any, rule: str = "sweep_shard",
+                solver: Callable | None = None) -> xr.Dataset:
+    """Solve shard ``shard`` of FE model ``fea`` and write it (atomically) to ``out``.
+
+    ``sweep_cfg`` is the model's ``sweep`` config (p_max_kpa, n_ratios,
+    n_pressures, n_shards); ``solver`` defaults to `make_solver(fea, actuator_cfg)`.
+    """
+    solver = make_solver(fea, actuator_cfg) if solver is None else solver
+    ds = run_shard(solver, shard=int(shard), p_max_kpa=sweep_cfg["p_max_kpa"], n_ratios=sweep_cfg["n_ratios"],
+                   n_pressures=sweep_cfg["n_pressures"], n_shards=sweep_cfg["n_shards"])
+    ds.attrs["fea"] = fea
+    ds.attrs["shard"] = int(shard)
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title=f"{fea.upper()} unit pressure sweep, shard {int(shard)}")
+    return ds
+
+
+def write_response(shards: Sequence[str | Path], out: str | Path, *, fea: str, sweep_cfg: Mapping[str, Any],
+                   config_slice: Any, rule: str = "sweep_merge") -> xr.Dataset:
+    """Merge the shard files of FE model ``fea`` into ``response_{fea}.nc`` (CONTRACT.md)."""
+    ds = merge_shards(shards, n_ratios=sweep_cfg["n_ratios"], n_pressures=sweep_cfg["n_pressures"])
+    solved = ~ds["mirrored"].values
+    n_ok = int(np.count_nonzero(ds["converged"].values[solved]))
+    wall = float(ds["wall_time_s"].sum())
+    log.info("%s sweep: %d points (%d solved, %d converged, %d mirrored), %.1f s of solver time",
+             fea, ds.sizes["point"], int(solved.sum()), n_ok, int((~solved).sum()), wall)
+    ds.attrs.update({"fea": fea, "p_max_kpa": float(sweep_cfg["p_max_kpa"]), "n_ratios": int(sweep_cfg["n_ratios"]),
+                     "n_pressures": int(sweep_cfg["n_pressures"]), "solver_wall_time_s": wall})
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title=f"{fea.upper()} unit response over (P_T, P_B): free angle and blocked moment per unit")
+    return ds
