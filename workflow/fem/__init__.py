@@ -1,0 +1,49 @@
+"""Nonlinear FEA of the bi-directional PNA unit (scikit-fem, issue 4).
+
+Compact public API (like a FElupe job)::
+
+    from workflow import fem
+    mesh = fem.build_unit_mesh(geometry, h=0.5, dim=2)
+    res = fem.solve_unit(mesh, p_top_kpa=300, p_bottom_kpa=0, case="free", contact=True)
+    res.bending_angle_deg, res.status, res.history   # one dict per load step
+
+Physics: three-term Mooney-Rivlin silicone on isochoric invariants with a
+mean-dilatation (Q1/P0, condensed) volumetric part K = bulk_ratio * mu0;
+compressible neo-Hooke paper layer (E = 1.2 GPa, nu = 0.2); follower
+pressure on the cavity walls with its exact load stiffness; penalty
+node-to-segment / node-to-face contact across the gaps; Newton with line
+search and adaptive load steps.  Units: mm, MPa, N (kPa for pressures and
+N m for the reported moments).
+"""
+
+from ._assembly import SolidAssembler
+from ._contact import ContactPair
+from ._material import mooney_rivlin_isochoric, neo_hooke_compressible
+from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh
+from ._pressure import pressure_load
+from ._solve import DEFAULT_SOLVER, STATUS_FLAGS, Model, PathResult, linear_solve, solve_path
+from ._unit import DEFAULT_CONTACT, DEFAULT_MATERIAL, UnitResult, material_constants, solve_unit, unit_model
+
+__all__ = [
+    "DEFAULT_CONTACT",
+    "DEFAULT_GEOMETRY",
+    "DEFAULT_MATERIAL",
+    "DEFAULT_SOLVER",
+    "STATUS_FLAGS",
+    "ContactPair",
+    "Model",
+    "PathResult",
+    "SolidAssembler",
+    "UnitMesh",
+    "UnitResult",
+    "build_grid_mesh",
+    "build_unit_mesh",
+    "linear_solve",
+    "material_constants",
+    "mooney_rivlin_isochoric",
+    "neo_hooke_compressible",
+    "pressure_load",
+    "solve_path",
+    "solve_unit",
+    "unit_model",
+]

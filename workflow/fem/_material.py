@@ -1,0 +1,142 @@
+"""Hyperelastic laws, vectorised over quadrature points, for 2D plane strain and 3D.
+
+Each law takes the deformation gradient ``F`` of shape ``(d, d, ...)`` (the
+point axes last, so every operation runs over contiguous arrays) with d = 2
+(plane strain: F33 = 1) or d = 3, and returns the strain energy density
+``psi`` (...), the first Piola-Kirchhoff stress ``P = dpsi/dF`` (d, d, ...)
+and the tangent ``A = d2psi/dFdF`` (d, d, d, d, ...).  Stresses in MPa when
+the constants are in MPa.  Plane strain evaluates the 3D law on F embedded
+with F33 = 1 and keeps the in-plane components (exactly the derivatives with
+respect to the in-plane entries of F); only those are ever formed.
+
+Both laws are written through the invariants I1 = tr C, I2 = (I1^2 - C:C)/2
+and J = det F, with the chain rule
+
+    P = sum_a psi_a dI_a/dF,
+    A = sum_ab psi_ab dI_a/dF (x) dI_b/dF + sum_a psi_a d2I_a/dFdF,
+
+dI1 = 2F, dI2 = 2(I1 F - F C), dJ = J F^-T and the matching second
+derivatives (``invariants``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["mooney_rivlin_isochoric", "neo_hooke_compressible", "invariants", "det_inv"]
+
+
+def det_inv(F: np.ndarray):
+    """Determinant and inverse of 2x2 or 3x3 matrices stored as (d, d, ...)."""
+    if F.shape[0] == 2:
+        J = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+        inv = np.array([[F[1, 1], -F[0, 1]], [-F[1, 0], F[0, 0]]]) / J
+        return J, inv
+    cof = np.empty_like(F)  # cofactor matrix: cof_ij = dJ/dF_ij
+    for i in range(3):
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        for j in range(3):
+            j1, j2 = (j + 1) % 3, (j + 2) % 3
+            cof[i, j] = F[i1, j1] * F[i2, j2] - F[i1, j2] * F[i2, j1]
+    J = np.einsum("j...,j...->...", F[0], cof[0])
+    return J, np.swapaxes(cof, 0, 1) / J
+
+
+def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[:, :, None, None] * b[None, None]
+
+
+def invariants(F: np.ndarray, second: bool = True):
+    """I1, I2, J of F (d, d, ...) and their first (and second) derivatives.
+
+    For d = 2 the invariants are those of the plane-strain F embedded in 3D
+    (F33 = 1), and the derivatives are the in-plane blocks of the 3D ones,
+    which equal the same formulas evaluated on the 2x2 arrays.  Returns
+    ``(v, dv, d2v)`` with ``v`` = (I1, I2, J), ``dv`` the three (d, d, ...)
+    gradients and ``d2v`` the three (d, d, d, d, ...) Hessians (None unless
+    ``second``).
+    """
+    d = F.shape[0]
+    C = np.einsum("ki...,kj...->ij...", F, F)
+    b = np.einsum("ik...,jk...->ij...", F, F)
+    I1 = np.trace(C) + (3 - d)
+    I2 = 0.5 * (I1**2 - np.einsum("ij...,ij...->...", C, C) - (3 - d))
+    J, Finv = det_inv(F)
+    FiT = np.swapaxes(Finv, 0, 1)
+    dI1 = 2.0 * F
+    dI2 = 2.0 * (I1 * F - np.einsum("ik...,kj...->ij...", F, C))
+    dJ = J * FiT
+    if not second:
+        return (I1, I2, J), (dI1, dI2, dJ), None
+    tail = (None,) * (F.ndim - 2)
+    eye = np.eye(d)
+    I4 = np.einsum("ik,jl->ijkl", eye, eye)[(Ellipsis,) + tail]
+    FT = np.swapaxes(F, 0, 1)
+    d2I1 = 2.0 * I4 * np.ones_like(I1)
+    # d/dF_kl of 2(I1 F - F C)_ij: 4 F_ij F_kl + 2 I1 d_ik d_jl - 2 d_ik C_lj - 2 F_il F_kj - 2 b_ik d_jl
+    d2I2 = (
+        4.0 * _outer(F, F)
+        + 2.0 * I1 * I4
+        - 2.0 * eye[(slice(None), None, slice(None), None) + tail] * np.swapaxes(C, 0, 1)[None, :, None, :]
+        - 2.0 * F[:, None, None, :] * FT[None, :, :, None]
+        - 2.0 * b[:, None, :, None] * eye[(None, slice(None), None, slice(None)) + tail]
+    )
+    # d/dF_kl of J F^-T_ij = J (Finv_ji Finv_lk - Finv_jk Finv_li)
+    d2J = J * (_outer(FiT, FiT) - FiT[:, None, None, :] * Finv[None, :, :, None])
+    return (I1, I2, J), (dI1, dI2, dJ), (d2I1, d2I2, d2J)
+
+
+def _chain(F, inv, psi, g, H, tangent):
+    """P and A from psi(I1, I2, J): gradient g (3 arrays), Hessian H (3x3 of arrays or None)."""
+    (_, dv, d2v) = inv
+    P = g[0] * dv[0] + g[1] * dv[1] + g[2] * dv[2]
+    if not tangent:
+        return psi, P, None
+    A = g[0] * d2v[0] + g[1] * d2v[1] + g[2] * d2v[2]
+    for a in range(3):
+        for b in range(3):
+            if H[a][b] is not None:
+                A = A + H[a][b] * _outer(dv[a], dv[b])
+    return psi, P, A
+
+
+def mooney_rivlin_isochoric(F: np.ndarray, c10: float, c01: float, c20: float = 0.0, tangent: bool = True):
+    """Three-term Mooney-Rivlin law on the isochoric invariants (Table 5).
+
+    psi = c10 (I1b - 3) + c01 (I2b - 3) + c20 (I1b - 3)^2 with
+    I1b = J^(-2/3) I1 and I2b = J^(-4/3) I2.  The volumetric part is added by
+    the element (mean dilatation, see ``_assembly``).  Initial shear modulus
+    mu0 = 2 (c10 + c01).
+    """
+    inv = invariants(F, tangent)
+    I1, I2, J = inv[0]
+    j23, j43 = J ** (-2.0 / 3.0), J ** (-4.0 / 3.0)
+    I1b, I2b = I1 * j23, I2 * j43
+    W1 = c10 + 2.0 * c20 * (I1b - 3.0)
+    W2 = c01
+    psi = c10 * (I1b - 3.0) + c01 * (I2b - 3.0) + c20 * (I1b - 3.0) ** 2
+    # derivatives of I1b, I2b with respect to (I1, I2, J)
+    d1 = [j23, 0.0, -2.0 / 3.0 * I1b / J]
+    d2 = [0.0, j43, -4.0 / 3.0 * I2b / J]
+    g = [W1 * d1[a] + W2 * d2[a] for a in range(3)]
+    H = [[2.0 * c20 * d1[a] * d1[b] for b in range(3)] for a in range(3)]
+    H[0][2] = H[2][0] = H[0][2] - W1 * (2.0 / 3.0) * j23 / J
+    H[1][2] = H[2][1] = H[1][2] - W2 * (4.0 / 3.0) * j43 / J
+    H[2][2] = H[2][2] + W1 * (10.0 / 9.0) * I1b / J**2 + W2 * (28.0 / 9.0) * I2b / J**2
+    H[0][1] = H[1][0] = H[1][1] = None  # W12 = W22 = 0 and d1[1] = 0
+    return _chain(F, inv, psi, g, H, tangent)
+
+
+def neo_hooke_compressible(F: np.ndarray, mu: float, lmbda: float, tangent: bool = True):
+    """Compressible neo-Hooke law (paper layer), exact under large rotations.
+
+    psi = mu/2 (I1 - 3) - mu ln J + lmbda/2 (ln J)^2; small-strain limit:
+    linear elasticity with Lame constants (lmbda, mu).
+    """
+    inv = invariants(F, tangent)
+    I1, _, J = inv[0]
+    lnJ = np.log(J)
+    psi = 0.5 * mu * (I1 - 3.0) - mu * lnJ + 0.5 * lmbda * lnJ**2
+    g = [0.5 * mu, 0.0, (lmbda * lnJ - mu) / J]
+    H = [[None, None, None], [None, None, None], [None, None, (mu + lmbda - lmbda * lnJ) / J**2]]
+    return _chain(F, inv, psi, g, H, tangent)

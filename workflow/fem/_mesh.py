@@ -1,0 +1,260 @@
+"""Structured meshes of the three-chamber PNA unit (Table 6 geometry).
+
+Geometry (CLARIFICATIONS 2), lengths in mm, x along the actuator, y across the
+paper layer (height), z across the width:
+
+* the strain-limiting paper layer, ``paper_width`` thick, centred on y = 0;
+* per side a base layer ``bot_layer`` thick, then ``n_chambers`` blocks
+  ``depth`` long and ``height`` tall, ``gap`` apart (no gap at the two ends,
+  so the model is ``n*depth + (n-1)*gap`` = 22.4 mm long);
+* each block holds an air pocket inset by ``ac_th_for`` along the length and
+  ``ac_th_side`` across the width, from the block's base (the top of the base
+  layer) up to ``height - ac_th_up``;
+* the bottom side mirrors the top.  Air vents and ``ends_ext`` are left out.
+
+2D: the longitudinal section through the width's symmetry plane (plane strain,
+bilinear quadrilaterals).  3D: the half model z in [0, width/2] with the
+symmetry plane at z = 0 (trilinear hexahedra).  The meshes are tensor-product
+grids through every geometric breakpoint, each interval cut into
+``ceil(length / h)`` elements (so halving ``h`` nests the meshes), with the
+pocket and gap cells removed.  The paper layer is ``paper_layers`` elements
+thick.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import skfem
+
+__all__ = ["DEFAULT_GEOMETRY", "UnitMesh", "build_unit_mesh", "build_grid_mesh"]
+
+#: Table 6 values used by the unit model, mm.
+DEFAULT_GEOMETRY: dict[str, float] = {
+    "depth": 6.8,
+    "gap": 1.0,
+    "height": 15.0,
+    "width": 20.0,
+    "bot_layer": 2.0,
+    "ac_th_for": 2.0,
+    "ac_th_up": 2.0,
+    "ac_th_side": 3.0,
+    "paper_width": 0.2,
+    "n_chambers": 3,
+}
+
+# Local node offsets (dx, dy[, dz]) in scikit-fem's node order of a cell
+# (MeshQuad: counter-clockwise; MeshHex: the order of MeshHex.init_tensor).
+_QUAD = np.array([(0, 0), (1, 0), (1, 1), (0, 1)])
+_HEX = np.array([(0, 0, 0), (0, 1, 0), (1, 0, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1), (1, 0, 1), (1, 1, 1)])
+# Faces as local node lists in cyclic order (orientation fixed afterwards).
+_QUAD_FACES = [(0, 1), (1, 2), (2, 3), (3, 0)]
+_HEX_FACES = [(0, 2, 4, 1), (3, 5, 7, 6), (0, 1, 5, 3), (2, 6, 7, 4), (0, 3, 6, 2), (1, 4, 7, 5)]
+
+
+@dataclass
+class UnitMesh:
+    """A mesh with the named node and facet sets the unit model needs.
+
+    Attributes
+    ----------
+    mesh : skfem.MeshQuad or skfem.MeshHex
+        Coordinates in mm.
+    material : ndarray of int, (ncells,)
+        0 = silicone, 1 = paper layer.
+    facets : dict of str -> ndarray (nfacets, nodes per facet)
+        Boundary facets with nodes ordered so that the outward normal of the
+        solid is ``R (x2 - x1)`` (2D) or ``x_xi x x_eta`` (3D).  Keys
+        ``cavity_top``, ``cavity_bottom`` and, per gap g and side s,
+        ``wall_{s}{g}_left`` / ``wall_{s}{g}_right`` (the two facing walls).
+    nodes : dict of str -> ndarray of int
+        ``clamp`` (x = 0), ``end`` (x = L), ``symmetry`` (z = 0, 3D only),
+        ``backbone_end`` / ``backbone_prev`` (paper-layer nodes of the last
+        and the last-but-one x column).
+    geometry : dict
+        The geometry parameters used (mm).
+    h : float
+        Target element size, mm.
+    """
+
+    mesh: skfem.Mesh
+    material: np.ndarray
+    facets: dict[str, np.ndarray]
+    nodes: dict[str, np.ndarray]
+    geometry: dict
+    h: float
+    contact_pairs: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def dim(self) -> int:
+        return self.mesh.p.shape[0]
+
+    @property
+    def length(self) -> float:
+        g = self.geometry
+        return g["n_chambers"] * g["depth"] + (g["n_chambers"] - 1) * g["gap"]
+
+    def write(self, path: str | Path, point_data: Mapping[str, np.ndarray] | None = None) -> Path:
+        """Write the mesh (and optional point data, e.g. displacement) with meshio."""
+        from skfem.io.meshio import to_meshio
+
+        m = to_meshio(self.mesh, point_data=dict(point_data or {}))
+        m.cell_data["material"] = [self.material.astype(np.int32)]
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        m.write(path)
+        return path
+
+
+def _divisions(breaks: np.ndarray, h: float) -> np.ndarray:
+    """Grid coordinates through ``breaks`` with intervals of at most about ``h``."""
+    pts = [breaks[:1]]
+    for a, b in zip(breaks[:-1], breaks[1:]):
+        n = max(1, int(np.ceil((b - a) / h - 1e-9)))
+        pts.append(np.linspace(a, b, n + 1)[1:])
+    return np.concatenate(pts)
+
+
+def _orient(p: np.ndarray, faces: np.ndarray, centroids: np.ndarray) -> np.ndarray:
+    """Reverse faces whose normal points into their cell (so all point outwards)."""
+    x = p[:, faces]  # (dim, nf, nfn)
+    if p.shape[0] == 2:
+        t = x[:, :, 1] - x[:, :, 0]
+        n = np.stack([t[1], -t[0]])
+    else:
+        n = np.cross((x[:, :, 2] - x[:, :, 0]).T, (x[:, :, 3] - x[:, :, 1]).T).T
+    mid = x.mean(axis=2)
+    flip = np.einsum("if,if->f", n, mid - centroids) < 0
+    faces = faces.copy()
+    faces[flip] = faces[flip, ::-1]
+    return faces
+
+
+def build_grid_mesh(coords: list[np.ndarray], keep=None):
+    """Tensor-product quad/hex mesh on grid ``coords``; ``keep(centres)`` masks cells.
+
+    Returns ``(mesh, boundary_faces, face_cells)`` with outward-oriented boundary
+    faces.  Unused nodes are removed.
+    """
+    dim = len(coords)
+    shape = [len(c) for c in coords]
+    grids = np.meshgrid(*coords, indexing="ij")
+    p = np.stack([g.ravel() for g in grids])
+    idx = np.arange(p.shape[1]).reshape(shape)
+    offs = _QUAD if dim == 2 else _HEX
+    ncell = [s - 1 for s in shape]
+    cells = []
+    for off in offs:
+        sl = tuple(slice(o, o + n) for o, n in zip(off, ncell))
+        cells.append(idx[sl].ravel())
+    t = np.stack(cells)
+    centres = p[:, t].mean(axis=1)
+    if keep is not None:
+        t = t[:, keep(centres)]
+    used = np.unique(t)
+    remap = -np.ones(p.shape[1], dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    p = p[:, used]
+    t = remap[t]
+    mesh = (skfem.MeshQuad if dim == 2 else skfem.MeshHex)(p, t.astype(np.int64))
+    # Boundary faces: the faces of exactly one cell.
+    flist = _QUAD_FACES if dim == 2 else _HEX_FACES
+    faces = np.concatenate([t[list(f)].T for f in flist])
+    owner = np.tile(np.arange(t.shape[1]), len(flist))
+    key = np.sort(faces, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    bnd = cnt[inv.ravel()] == 1
+    faces, owner = faces[bnd], owner[bnd]
+    faces = _orient(p, faces, p[:, t].mean(axis=1)[:, owner])
+    return mesh, faces, owner
+
+
+def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, paper_layers: int = 1) -> UnitMesh:
+    """Structured mesh of the three-chamber unit.
+
+    Parameters
+    ----------
+    geom : mapping, optional
+        Table 6 parameters in mm (``DEFAULT_GEOMETRY`` keys); missing keys take
+        the defaults.
+    h : float
+        Target element size in mm (every geometric interval is cut into
+        ``ceil(length / h)`` equal elements).
+    dim : {2, 3}
+        2 = plane-strain section, 3 = half model across the width.
+    paper_layers : int
+        Elements through the paper layer's thickness.
+    """
+    g = dict(DEFAULT_GEOMETRY)
+    g.update(dict(geom or {}))
+    n = int(g["n_chambers"])
+    d, gap, H, bl = g["depth"], g["gap"], g["height"], g["bot_layer"]
+    tf, tu, ts, tp = g["ac_th_for"], g["ac_th_up"], g["ac_th_side"], g["paper_width"]
+    L = n * d + (n - 1) * gap
+    y0 = tp / 2
+    yb = y0 + bl  # top of the base layer = block base = pocket floor
+    yp = yb + H - tu  # pocket roof
+    yt = yb + H  # block top
+    xs = [0.0]
+    for k in range(n):
+        x0 = k * (d + gap)
+        xs += [x0 + tf, x0 + d - tf, x0 + d]
+        if k < n - 1:
+            xs.append(x0 + d + gap)
+    xb = np.array(xs)
+    ybr = np.array([-yt, -yp, -yb, -y0, y0, yb, yp, yt])
+    xc = _divisions(xb, h)
+    yc = np.concatenate([_divisions(ybr[:4], h), np.linspace(-y0, y0, paper_layers + 1)[1:], _divisions(ybr[4:], h)[1:]])
+    coords = [xc, yc]
+    if dim == 3:
+        zb = np.array([0.0, g["width"] / 2 - ts, g["width"] / 2])
+        coords.append(_divisions(zb, h))
+    pockets = [(k * (d + gap) + tf, k * (d + gap) + d - tf) for k in range(n)]
+    gaps = [(k * (d + gap) + d, (k + 1) * (d + gap)) for k in range(n - 1)]
+
+    def solid(c):
+        x, ay = c[0], np.abs(c[1])
+        hole = np.zeros(x.shape, bool)
+        in_z = np.ones(x.shape, bool) if dim == 2 else c[2] < g["width"] / 2 - ts
+        for a, b in pockets:
+            hole |= (x > a) & (x < b) & (ay > yb) & (ay < yp) & in_z
+        for a, b in gaps:
+            hole |= (x > a) & (x < b) & (ay > yb)
+        return ~hole
+
+    mesh, faces, owner = build_grid_mesh(coords, solid)
+    p = mesh.p
+    centres = p[:, mesh.t].mean(axis=1)
+    material = (np.abs(centres[1]) < y0).astype(np.int64)
+    mid = p[:, faces].mean(axis=2)
+    tol = 1e-9 * max(L, 1.0) + 1e-9
+    facets: dict[str, np.ndarray] = {}
+    for side, sgn in (("top", 1.0), ("bottom", -1.0)):
+        ys = sgn * mid[1]
+        sel = np.zeros(faces.shape[0], bool)
+        in_z = np.ones(faces.shape[0], bool) if dim == 2 else mid[2] < g["width"] / 2 - ts + tol
+        for a, b in pockets:
+            sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yb - tol) & (ys < yp + tol) & in_z
+        facets[f"cavity_{side}"] = faces[sel]
+    pairs = []
+    for side, sgn in (("top", 1.0), ("bottom", -1.0)):
+        ys = sgn * mid[1]
+        for k, (a, b) in enumerate(gaps):
+            for name, x in (("left", a), ("right", b)):
+                sel = (np.abs(mid[0] - x) < tol) & (ys > yb)
+                facets[f"wall_{side}{k}_{name}"] = faces[sel]
+            pairs.append((f"wall_{side}{k}_left", f"wall_{side}{k}_right"))
+    ux = np.unique(np.round(p[0], 9))
+    paper = np.abs(p[1]) <= y0 + tol
+    nodes = {
+        "clamp": np.flatnonzero(np.abs(p[0]) < tol),
+        "end": np.flatnonzero(np.abs(p[0] - L) < tol),
+        "backbone_end": np.flatnonzero(paper & (np.abs(p[0] - L) < tol)),
+        "backbone_prev": np.flatnonzero(paper & (np.abs(p[0] - ux[-2]) < tol)),
+    }
+    if dim == 3:
+        nodes["symmetry"] = np.flatnonzero(np.abs(p[2]) < tol)
+    return UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=g, h=float(h), contact_pairs=pairs)

@@ -1,0 +1,311 @@
+"""Nonlinear static solver: Newton-Raphson with adaptive load stepping.
+
+A ``Model`` holds the body (``SolidAssembler``), follower pressures, penalty
+contact pairs and the kinematic constraints u = T v + lam u_D (fixed dofs are
+left out of T; a "tie" group of dofs shares one column, e.g. the axial
+displacement of an end face that must stay plane).  ``solve_path`` ramps the
+load factor lam from 0 to 1 (pressures and prescribed displacements scale with
+lam) with adaptive steps: a step that diverges, produces an inverted element
+(J <= 0), a non-finite or singular solve, or needs more than ``max_iter``
+iterations is cut back and retried; a step that converges fast lets the next
+one grow.  A failed path is a result (``status`` > 0, last converged load),
+never an exception.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from ._assembly import Pattern, SolidAssembler, vector_dofs
+from ._pressure import pressure_load
+
+__all__ = ["Model", "PathResult", "solve_path", "STATUS_FLAGS", "DEFAULT_SOLVER", "linear_solve"]
+
+#: CF flag values / meanings of the solver status.
+STATUS_FLAGS = {0: "converged", 1: "step_size_below_minimum", 2: "too_many_steps", 3: "solver_error"}
+
+#: Step control and tolerances (config ``actuator.solver``).
+DEFAULT_SOLVER = {
+    "initial_step": 0.1,  # first load-factor increment
+    "min_step": 1.0e-4,  # give up below this increment
+    "max_step": 0.25,  # largest increment
+    "max_steps": 200,  # accepted + rejected steps
+    "max_iter": 15,  # Newton iterations per step
+    "grow_below_iter": 6,  # grow the step when a step took fewer iterations
+    "grow": 1.5,
+    "cut": 0.5,
+    "rtol": 1.0e-6,  # |r| <= rtol * (|f_ext| + |reactions|)
+    "atol": 1.0e-10,  # N
+    "predictor": True,  # extrapolate the last increment as the first guess
+    "line_search": True,  # Matthies-Strang line search on the Newton correction
+}
+
+try:  # MKL PARDISO when it installs (x86_64 wheels); SuperLU otherwise
+    import pypardiso as _pypardiso
+except ImportError:  # pragma: no cover - depends on the platform
+    _pypardiso = None
+
+
+def linear_solve(A: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
+    """Sparse direct solve with pypardiso when importable, else SciPy's SuperLU."""
+    if _pypardiso is not None:
+        return _pypardiso.spsolve(sp.csr_matrix(A), b)
+    import scipy.sparse.linalg as spla
+
+    return spla.spsolve(sp.csc_matrix(A), b)
+
+
+class Model:
+    """Residual and tangent of body + follower pressures + contact under constraints.
+
+    Parameters
+    ----------
+    solid : SolidAssembler
+    pressures : dict name -> (facets, p) with p in MPa at lam = 1
+    contacts : list of ContactPair
+    penalty : float
+        Contact penalty stiffness eps, MPa/mm.
+    fixed : array of dofs held at zero
+    prescribed : dict dof -> value (mm) at lam = 1
+    ties : list of arrays of dofs that share one unknown
+    """
+
+    def __init__(self, solid: SolidAssembler, pressures=None, contacts=(), penalty=0.0, fixed=(), prescribed=None, ties=()):
+        self.solid = solid
+        self.p0 = solid.mesh_p if hasattr(solid, "mesh_p") else None
+        self.pressures = dict(pressures or {})
+        self.contacts = list(contacts)
+        self.penalty = float(penalty)
+        n = solid.ndofs
+        self.n = n
+        prescribed = dict(prescribed or {})
+        self.uD = np.zeros(n)
+        for dof, val in prescribed.items():
+            self.uD[dof] = val
+        blocked = np.zeros(n, bool)
+        blocked[np.asarray(list(fixed), dtype=int)] = True
+        blocked[np.asarray(list(prescribed), dtype=int)] = True
+        self.constrained = np.flatnonzero(blocked)
+        col = -np.ones(n, dtype=np.int64)
+        tied = np.zeros(n, bool)
+        for grp in ties:
+            tied[np.asarray(grp)] = True
+        free = np.flatnonzero(~blocked & ~tied)
+        col[free] = np.arange(free.size)
+        m = free.size
+        for grp in ties:
+            grp = np.asarray(grp)
+            grp = grp[~blocked[grp]]
+            col[grp] = m
+            m += 1
+        rows = np.flatnonzero(col >= 0)
+        self.T = sp.csr_matrix((np.ones(rows.size), (rows, col[rows])), shape=(n, m))
+        self.m = m
+        # fixed sparsity: body + pressure facets
+        r_list, c_list = [solid.rows], [solid.cols]
+        for facets, _ in self.pressures.values():
+            fd = vector_dofs(facets, solid.dim)
+            k = fd.shape[1]
+            r_list.append(np.repeat(fd, k, axis=1).ravel())
+            c_list.append(np.tile(fd, (1, k)).ravel())
+        self.pattern = Pattern(np.concatenate(r_list), np.concatenate(c_list), n)
+        self.timing = {"assembly_s": 0.0, "solve_s": 0.0}
+
+    def positions(self, u: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
+        return p_ref + u.reshape(-1, self.solid.dim).T
+
+    def evaluate(self, u: np.ndarray, lam: float, p_ref: np.ndarray, tangent: bool = True):
+        """Full residual r = f_int + f_contact - f_ext, tangent (csr) and info."""
+        t0 = time.perf_counter()
+        d = self.solid.dim
+        f_int, kvals, jmin = self.solid.assemble(u, tangent)
+        info = {"jmin": jmin, "gmin": np.inf}
+        if not jmin > 0:
+            self.timing["assembly_s"] += time.perf_counter() - t0
+            return None, None, info
+        x = self.positions(u, p_ref)
+        f_ext = np.zeros(self.n)
+        vals = [kvals] if tangent else []
+        for facets, p in self.pressures.values():
+            fe, Ke = pressure_load(x, facets, lam * p, tangent)
+            fd = vector_dofs(facets, d)
+            f_ext += np.bincount(fd.ravel(), weights=fe.reshape(fe.shape[0], -1).ravel(), minlength=self.n)
+            if tangent:
+                vals.append(Ke.ravel())
+        r = f_int - f_ext
+        K = self.pattern.matrix(np.concatenate(vals)) if tangent else None
+        if self.contacts and self.penalty > 0:
+            cr, cc, cv = [], [], []
+            for pair in self.contacts:
+                dofs, fc, Kc, gmin = pair.evaluate(x, self.penalty, tangent)
+                info["gmin"] = min(info["gmin"], gmin)
+                if dofs.size:
+                    r += np.bincount(dofs.ravel(), weights=fc.ravel(), minlength=self.n)
+                    if tangent:
+                        k = dofs.shape[1]
+                        cr.append(np.repeat(dofs, k, axis=1).ravel())
+                        cc.append(np.tile(dofs, (1, k)).ravel())
+                        cv.append(Kc.ravel())
+            if tangent and cr:
+                K = K + sp.csr_matrix((np.concatenate(cv), (np.concatenate(cr), np.concatenate(cc))), shape=(self.n, self.n))
+        info["f_ext_norm"] = float(np.linalg.norm(f_ext))
+        info["r"] = r
+        self.timing["assembly_s"] += time.perf_counter() - t0
+        return r, K, info
+
+
+@dataclass
+class PathResult:
+    """Outcome of ``solve_path``: final state, status and per-step history."""
+
+    u: np.ndarray
+    lam: float
+    status: int
+    reason: str
+    iterations: int
+    steps: int
+    cutbacks: int
+    history: list = field(default_factory=list)
+    timing: dict = field(default_factory=dict)
+
+
+def _line_search(model: Model, u: np.ndarray, du: np.ndarray, rr: np.ndarray, lam: float, p_ref: np.ndarray,
+                 ratio: float = 0.5, trials: int = 3) -> np.ndarray:
+    """Scale the Newton correction so that the residual's component along it drops.
+
+    s(a) = du . r(u + a du); s(0) < 0 for a descent direction.  The full step is
+    kept when |s(1)| <= ratio |s(0)| (Newton near the solution); otherwise a few
+    regula-falsi steps on s (the Matthies-Strang / Crisfield line search).  This
+    tames the first iterations of a load step, where the linearised rotation
+    of nearly incompressible and of stiff paper elements causes large spurious
+    volumetric stresses.
+    """
+    T = model.T
+    s0 = float(rr @ (T.T @ du))
+    if not s0 < 0:
+        return du
+    a_lo, s_lo, a_hi = 0.0, s0, 1.0
+    r1, _, _ = model.evaluate(u + du, lam, p_ref, tangent=False)
+    if r1 is None:
+        s_hi = np.inf
+    else:
+        s_hi = float((T.T @ r1) @ (T.T @ du))
+    if np.isfinite(s_hi) and abs(s_hi) <= ratio * abs(s0):
+        return du
+    a = 1.0
+    for _ in range(trials):
+        if not np.isfinite(s_hi):
+            a = 0.5 * (a_lo + a_hi)
+        else:
+            if s_hi < 0:  # still descending at the full step: take it
+                return du * a_hi
+            a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
+            a = min(max(a, a_lo + 0.1 * (a_hi - a_lo)), a_lo + 0.9 * (a_hi - a_lo))
+        ra, _, _ = model.evaluate(u + a * du, lam, p_ref, tangent=False)
+        sa = np.inf if ra is None else float((T.T @ ra) @ (T.T @ du))
+        if np.isfinite(sa) and abs(sa) <= ratio * abs(s0):
+            return a * du
+        if np.isfinite(sa) and sa < 0:
+            a_lo, s_lo = a, sa
+        else:
+            a_hi, s_hi = a, sa
+    return a * du
+
+
+def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: dict):
+    """Newton iterations at fixed lam; returns (ok, u, iterations, reason, info)."""
+    T = model.T
+    u = u0.copy()
+    u[model.constrained] = lam * model.uD[model.constrained]
+    r0 = None
+    info = {}
+    for it in range(1, opts["max_iter"] + 1):
+        r, K, info = model.evaluate(u, lam, p_ref)
+        if r is None:
+            return False, u, it, "inverted element", info
+        rr = T.T @ r
+        norm = float(np.linalg.norm(rr))
+        if not np.isfinite(norm):
+            return False, u, it, "non-finite residual", info
+        ref = info["f_ext_norm"] + float(np.linalg.norm(r[model.constrained]))
+        if it > 1 and norm <= max(opts["rtol"] * ref, opts["atol"]):
+            return True, u, it - 1, "", info
+        if r0 is None:
+            r0 = max(norm, 1e-300)
+        elif norm > 1e6 * r0:
+            return False, u, it, "diverged", info
+        Kr = (T.T @ K @ T).tocsr()
+        t0 = time.perf_counter()
+        try:
+            dv = linear_solve(Kr, -rr)
+        except Exception as exc:  # singular or solver failure: cut back
+            return False, u, it, f"linear solve failed: {exc}", info
+        finally:
+            model.timing["solve_s"] += time.perf_counter() - t0
+        if not np.all(np.isfinite(dv)):
+            return False, u, it, "singular tangent", info
+        du = T @ dv
+        if opts["line_search"]:
+            du = _line_search(model, u, du, rr, lam, p_ref)
+        u = u + du
+    return False, u, opts["max_iter"], "no convergence", info
+
+
+def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, measure: Callable | None = None,
+               u0: np.ndarray | None = None) -> PathResult:
+    """Ramp the load factor from 0 to 1 with adaptive steps.
+
+    ``measure(u, lam, info)`` is called after every accepted step; its dict is
+    stored in ``history`` together with lam, the Newton iterations and the
+    smallest contact gap.
+    """
+    opts = dict(DEFAULT_SOLVER)
+    opts.update(options or {})
+    t_start = time.perf_counter()
+    u = np.zeros(model.n) if u0 is None else u0.copy()
+    u_prev = u.copy()
+    lam, dlam, dlam_prev = 0.0, float(opts["initial_step"]), 0.0
+    history, iters, steps, cuts = [], 0, 0, 0
+    status, reason = 0, ""
+    while lam < 1.0 - 1e-12:
+        if steps >= opts["max_steps"]:
+            status, reason = 2, "too many steps"
+            break
+        dlam = min(dlam, 1.0 - lam)
+        target = lam + dlam
+        guess = u
+        if opts["predictor"] and dlam_prev > 0:
+            guess = u + (dlam / dlam_prev) * (u - u_prev)
+        steps += 1
+        try:
+            ok, u_new, its, why, info = _newton(model, guess, target, p_ref, opts)
+        except Exception as exc:  # never let one point stop a sweep
+            ok, u_new, its, why, info = False, u, 0, f"error: {exc!r}", {}
+        iters += its
+        if ok:
+            u_prev, u = u, u_new
+            lam, dlam_prev = target, dlam
+            rec = {"lam": lam, "iterations": its, "gmin": info.get("gmin", np.inf)}
+            if measure is not None:
+                rec.update(measure(u, lam, info))
+            history.append(rec)
+            if its < opts["grow_below_iter"]:
+                dlam = min(dlam * opts["grow"], opts["max_step"])
+        else:
+            cuts += 1
+            reason = why
+            dlam *= opts["cut"]
+            if dlam < opts["min_step"]:
+                status = 1
+                break
+    if status == 0:
+        reason = ""
+    timing = dict(model.timing)
+    timing["wall_s"] = time.perf_counter() - t_start
+    return PathResult(u=u, lam=lam, status=status, reason=reason, iterations=iters, steps=steps, cutbacks=cuts,
+                      history=history, timing=timing)
