@@ -42,6 +42,8 @@ def get_final_output():
         "results/musculoskeletal/rsm_r2.png",
     ]
     out += expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS)
+    # OpenSim backend checked against the authors' export (empty when it is absent).
+    out += ["results/validation/musculoskeletal.nc", "results/validation/musculoskeletal.png"]
     return out
 
 
