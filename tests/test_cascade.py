@@ -172,3 +172,101 @@ def test_non_convergence_is_reported_not_raised():
 
     eq = C.solve_equilibrium(model(unit=Broken()), [100, 0] * 4)
     assert not eq.converged and eq.status != 0
+
+
+def test_springs_from_loads_use_points_or_a_scaled_curve():
+    targets = np.array([[0, 0, 0], [90, 0, 0], [90, 90, 0], [90, 100, 80], [0, 100, 80]], float)
+    passive = np.array([[0, 0, 0], [0.05, 0, 0], [0.05, 0.016, 0], [0.05, 0.024, 0.003], [0, 0.024, 0.003]])
+    sp, note = F.springs_from_loads(targets, passive)
+    assert "patient points" in note
+    for j, (a, m) in enumerate([(90, 0.05), (100, 0.024), (80, 0.003)]):
+        assert sp[j].moment_nm(a) == pytest.approx(m) and sp[j].moment_nm(0) == 0
+    assert sp[1].moment_nm(90) == pytest.approx(0.016)
+    # A full curve (OpenSim backend) lends its shape, scaled through the patient's point.
+    ang = np.arange(0, 105, 5.0)
+    curve = np.vstack([1e-5 * ang**2, 4e-6 * ang**2, 6e-7 * ang**2])
+    sp2, note2 = F.springs_from_loads(targets, passive, ang, curve)
+    assert "scaled" in note2
+    assert sp2[0].moment_nm(90) == pytest.approx(0.05)
+    assert sp2[0].moment_nm(45) == pytest.approx(0.05 / 4, rel=1e-6)  # quadratic shape kept
+
+
+def test_plan_dataset_roundtrip_and_validation(tmp_path):
+    import xarray as xr
+
+    from workflow.provenance import write_dataset
+    from workflow.validation_cascade import compare_pressures, read_pressure_table
+
+    m = model()
+    targets = {"TGE1": [0, 0, 0], "TGE2": [90, 0, 0], "TGE4": [90, 100, 80]}
+    plans = C.plan_patient(m, targets, tol_deg=5.0, active_limits_nm=LIMITS)
+    ds = C.plans_dataset(m, plans, tol_deg=5.0, active_limits_nm=LIMITS)
+    path = write_dataset(ds, tmp_path / "plan.nc", rule="test", config_slice={}, title="t")
+    back = xr.load_dataset(path)
+    for v in ("pressure_kpa", "target_angle_deg", "predicted_angle_deg", "achieved", "reason"):
+        assert v in back
+    assert back["pressure_kpa"].dims == ("exercise", "group", "chamber")
+    np.testing.assert_allclose(back["pressure_kpa"].values, ds["pressure_kpa"].values)
+    assert list(back["reason"].values) == [p.reason for p in plans]
+    assert back["status"].attrs["flag_meanings"].split()[0] == "converged"
+    # Validation against a table: errors per pressure, relative only above the floor.
+    csv = tmp_path / "ref.csv"
+    csv.write_text("exercise," + ",".join(C.PRESSURE_NAMES) + "\nTGE1,100,5,100,200,0,50,20,20\n")
+    val = compare_pressures(back, {"ref": read_pressure_table(csv)}, rel_floor_kpa=10.0)
+    ours = back["pressure_kpa"].sel(exercise="TGE1").values.ravel()
+    ref = np.array([100, 5, 100, 200, 0, 50, 20, 20.0])
+    np.testing.assert_allclose(val["abs_error"].sel(table="ref", exercise="TGE1"), np.abs(ours - ref))
+    rel = val["rel_error"].sel(table="ref", exercise="TGE1").values
+    assert np.isnan(rel[1]) and np.isnan(rel[4]) and rel[3] == pytest.approx(abs(ours[3] - 200) / 200)
+    assert np.all(np.isnan(val["reference"].sel(exercise="TGE2")))
+    assert bool(val["paper_reached"].sel(paper_set="dummy", exercise="TGE2"))
+    assert not bool(val["paper_reached"].sel(paper_set="fea_2d", exercise="TGE4"))
+
+
+def test_write_cascade_plan_from_stage_files(tmp_path):
+    """The rule's entry point on minimal upstream files (contract layouts)."""
+    import xarray as xr
+
+    from test_finger import MEASURES, SECTION
+
+    joints = ["MCP", "PIP", "DIP"]
+    ex = ["TGE1", "TGE2"]
+    xr.Dataset({"depth": ("run", [0.0, 1.0])}, coords={"run": [9, 12], "marker": ("run", ["Original", "DM"])}) \
+        .to_netcdf(tmp_path / "ccd.nc")
+    mom = np.full((2, 1, 3, 3, 2), np.nan)
+    mom[0, 0, 0, 1, 0] = 0.05
+    xr.Dataset({"moment_nm": (("run", "finger", "joint", "angle_deg", "activation"), mom)},
+               coords={"run": [9, 12], "finger": ["F3"], "joint": joints, "angle_deg": [80.0, 90.0, 100.0],
+                       "activation": [0.01, 1.0]}).to_netcdf(tmp_path / "moments.nc")
+    xr.Dataset(
+        {"x": ("dimension", [0.0, 0.0, 0.0]),
+         "target_angle_deg": (("exercise", "joint"), [[0, 0, 0], [90, 0, 0]]),
+         "passive_moment_nm": (("exercise", "joint"), [[0, 0, 0], [0.05, 0, 0]]),
+         "active_limit_nm": ("joint", list(LIMITS))},
+        coords={"exercise": ex, "joint": joints, "dimension": ["depth", "length", "breadth"]},
+    ).to_netcdf(tmp_path / "loads.nc")
+    # PIP and DIP have no sample above 0 deg in these loads: the entry point must say so.
+    cfg = {"tolerance_deg": 5.0, "margin_deg": 0.25, "tie_cmc_mcp": True, "p_max_kpa": 300.0,
+           "strap_stiffness_n_per_m": 240e3, "gravity_m_s2": 9.81,
+           "densities": {**DENSITIES, "silicone": 1240.0, "paper": 800.0},
+           "section_points": str(SECTION), "cmc_length_fraction": 0.5, "tip_units": 1, "units_per_group": {},
+           "unit_geometry_mm": ACTUATOR}
+    anth = {"coded_unit_sd": 1.0, "measures": {k: {"mean": m, "sd": s} for k, (m, s) in MEASURES.items()}}
+    kw = dict(ccd_nc=tmp_path / "ccd.nc", moments_nc=tmp_path / "moments.nc", joint_loads_nc=tmp_path / "loads.nc",
+              cascade_cfg=cfg, anthropometry=anth, config_slice={"c": 1})
+    with pytest.raises(ValueError, match="PIP"):
+        C.write_cascade_plan("p", {"finger": "F3"}, LinearUnit(), out_nc=tmp_path / "x.nc", out_png=None, **kw)
+    xr.Dataset(
+        {"x": ("dimension", [0.0, 0.0, 0.0]),
+         "target_angle_deg": (("exercise", "joint"), [[0, 0, 0], [90, 100, 80]]),
+         "passive_moment_nm": (("exercise", "joint"), [[0, 0, 0], [0.05, 0.0285, 0.0032]]),
+         "active_limit_nm": ("joint", list(LIMITS))},
+        coords={"exercise": ex, "joint": joints, "dimension": ["depth", "length", "breadth"]},
+    ).to_netcdf(tmp_path / "loads.nc")
+    ds = C.write_cascade_plan("p", {"finger": "F3"}, LinearUnit(), out_nc=tmp_path / "plan.nc",
+                              out_png=tmp_path / "poses.png", **kw)
+    back = xr.load_dataset(tmp_path / "plan.nc")
+    assert back.attrs["rule"] == "cascade_plan" and "config_sha256" in back.attrs
+    assert (tmp_path / "poses.png").stat().st_size > 10_000
+    assert bool(ds["achieved"].sel(exercise="TGE1")) and not bool(ds["achieved"].sel(exercise="TGE2"))
+    assert list(ds["units_per_group"].values) == [5, 6, 4, 4]
