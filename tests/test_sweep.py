@@ -253,3 +253,30 @@ def test_snakemake_resumes_a_missing_shard_and_builds_downstream(tmp_path, repo)
     counts = {j[0]: int(j[1]) for j in jobs if len(j) == 2 and j[1].isdigit()}
     assert counts.get("sweep_shard") == 1, out
     assert counts.get("sweep_merge") == 1  # 3D only: the 2D response is complete
+
+
+def test_samples_from_paths_exact_interpolated_and_failed():
+    scales = np.arange(1, 11) / 10
+    free = {"status": 0, "wall_time_s": 6.0,
+            "history": [{"lam": s, "iterations": 3, "bending_angle_deg": 10 * s} for s in scales]}
+    lam_b = [0.05, 0.15, 0.3, 0.6, 1.0]
+    blocked = {"status": 0, "wall_time_s": 4.0,
+               "history": [{"lam": s, "iterations": 5, "bending_moment_nm": 0.2 * s} for s in lam_b]}
+    out = sweep.samples_from_paths((300.0, 60.0), scales, free, blocked)
+    np.testing.assert_allclose(out["bending_angle_deg"], 10 * scales)  # exact steps
+    np.testing.assert_allclose(out["bending_moment_nm"], 0.2 * scales)  # linear data: interpolation is exact
+    np.testing.assert_allclose(out["p_bottom_kpa"], 60.0 * scales)
+    assert np.all(out["status"] == 0)
+    assert out["newton_iterations"].sum() == 10 * 3 + 5 * 5  # every Newton iteration counted once
+    assert out["wall_time_s"].sum() == pytest.approx(10.0)
+
+    blocked_failed = {"status": 1, "wall_time_s": 4.0, "history": blocked["history"][:3] +
+                      [{"lam": 0.55, "iterations": 9, "bending_moment_nm": 0.11}]}
+    out = sweep.samples_from_paths((300.0, 60.0), scales, free, blocked_failed)
+    np.testing.assert_array_equal(out["status"], [0, 0, 0, 0, 0, 1, 2, 2, 2, 2])
+    assert np.all(np.isnan(out["bending_angle_deg"][5:])) and np.all(np.isnan(out["bending_moment_nm"][5:]))
+    assert np.all(np.isfinite(out["bending_moment_nm"][:5]))
+    # the samples plug into a shard: the wrapper the lead writes around workflow.fem has this shape
+    ds = sweep.run_shard(lambda d, s: sweep.samples_from_paths(d, s, free, blocked_failed), shard=0, n_shards=1,
+                         p_max_kpa=300.0, n_ratios=2, n_pressures=10)
+    assert int((ds["status"] == 0).sum()) == 10

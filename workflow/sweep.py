@@ -53,6 +53,7 @@ __all__ = [
     "run_shard",
     "merge_shards",
     "make_solver",
+    "samples_from_paths",
     "write_shard",
     "write_response",
 ]
@@ -312,6 +313,73 @@ def merge_shards(shards: Iterable[xr.Dataset | str | Path], *, n_ratios: int, n_
     return _points_dataset(full, mirrored=mirrored, source=source)
 
 
+def _get(obj: Any, key: str, default: Any = None) -> Any:
+    return obj.get(key, default) if isinstance(obj, Mapping) else getattr(obj, key, default)
+
+
+def samples_from_paths(direction: Sequence[float], scales: np.ndarray, free: Any, blocked: Any,
+                       *, lam_tol: float = 1e-9) -> dict[str, np.ndarray]:
+    """Samples at ``scales`` from a free and a blocked continuation solve along one ray.
+
+    ``free`` and ``blocked`` are path results (objects or mappings) with
+    ``status`` (0 = reached load factor 1), ``wall_time_s`` and ``history``: one
+    record per accepted load step with ``lam`` (load factor), ``iterations``
+    and the measured ``bending_angle_deg`` (free) / ``bending_moment_nm``
+    (blocked), e.g. `workflow.fem.UnitResult`.
+
+    A scale equal to an accepted load factor (within ``lam_tol``) takes that
+    step's value; otherwise the value is interpolated linearly in the load
+    factor between the accepted steps around it, with the unloaded state
+    (lam = 0: straight, no moment; true without gravity) below the first step.
+    Ask the solver to land on the scales to avoid interpolating.  Scales beyond
+    the last accepted step of either case are not converged: the first gets
+    status ``diverged``, the rest ``not_reached``.  Newton iterations are those
+    of the steps since the previous sample (both cases); the ray's wall time is
+    shared among the samples in proportion to them.
+    """
+    scales = np.asarray(scales, float)
+    out_vals = {}
+    reached = np.ones(scales.size, dtype=bool)
+    iters = np.zeros(scales.size)
+    n_interp = 0
+    for case, key in ((free, "bending_angle_deg"), (blocked, "bending_moment_nm")):
+        hist = list(_get(case, "history", []) or [])
+        lam = np.array([0.0] + [float(h["lam"]) for h in hist])
+        val = np.array([0.0] + [float(h[key]) for h in hist])
+        its = np.array([0.0] + [float(h.get("iterations", 0)) for h in hist])
+        lam_last = lam[-1] if _get(case, "status", 0) != 0 else max(lam[-1], 1.0)
+        reached &= scales <= lam_last + lam_tol
+        v = np.interp(scales, lam, val)
+        exact = np.isclose(scales[:, None], lam[None, 1:], rtol=0, atol=lam_tol).any(axis=1)
+        n_interp += int(np.count_nonzero(~exact & reached))
+        cum = np.cumsum(its)
+        idx = np.searchsorted(lam, scales - lam_tol)  # first step at or after each scale
+        idx = np.minimum(idx, lam.size - 1)
+        at = cum[idx]
+        iters += np.diff(np.r_[0.0, at])
+        out_vals[key] = v
+    if n_interp:
+        log.warning("ray %s: %d sample values interpolated between load steps", tuple(direction), n_interp)
+    status = np.zeros(scales.size, dtype=int)
+    not_reached = np.flatnonzero(~reached)
+    if not_reached.size:
+        status[not_reached] = 2
+        status[not_reached[0]] = 1
+    for key in out_vals:
+        out_vals[key][~reached] = np.nan
+    wall = float(_get(free, "wall_time_s", 0.0)) + float(_get(blocked, "wall_time_s", 0.0))
+    share = iters / iters.sum() if iters.sum() > 0 else np.full(scales.size, 1.0 / scales.size)
+    return {
+        "p_top_kpa": scales * float(direction[0]),
+        "p_bottom_kpa": scales * float(direction[1]),
+        "bending_angle_deg": out_vals["bending_angle_deg"],
+        "bending_moment_nm": out_vals["bending_moment_nm"],
+        "status": status,
+        "newton_iterations": iters.astype(int),
+        "wall_time_s": wall * share,
+    }
+
+
 def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Sequence[float], np.ndarray], Any]:
     """The ray solver of FE model ``fea`` ('2d' or '3d') for the sweep.
 
@@ -319,7 +387,9 @@ def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Seque
     ``solve_ray(direction, scales)`` that runs the free case and the blocked
     case along the ray (P_T, P_B) = s * direction for the given scales and
     returns the fields of `SAMPLE_FIELDS` (angle per unit in degrees, blocked
-    moment per unit in N m, full actuator width, status in `STATUS_FLAGS`).
+    moment per unit in N m, full actuator width, status in `STATUS_FLAGS`),
+    e.g. ``samples_from_paths(direction, scales, fem.solve_unit(..., case="free"),
+    fem.solve_unit(..., case="blocked"))``.
     """
     raise NotImplementedError(
         f"make_solver({fea!r}): the FE solver of issue 4 (workflow.fem.solve_unit) is not wired into the "
