@@ -59,6 +59,24 @@ def get_patient(wildcards):
     return config["patients"][wildcards.patient]
 
 
+# --- Stage surrogates (issue 5): sweep shards ---------------------------------
+def get_sweep_params(wildcards):
+    """Param function: one FE model's sweep config (p_max_kpa, n_ratios, n_pressures, n_shards)."""
+    return config["sweep"][wildcards.fea]
+
+
+def get_sweep_slice(wildcards):
+    """Param function: the config a sweep of one FE model depends on (its hash goes into the outputs)."""
+    return {"sweep": {wildcards.fea: config["sweep"][wildcards.fea]}, "actuator": config.get("actuator", {})}
+
+
+def get_sweep_shards(wildcards):
+    """Input function: the shard files of one FE model's sweep."""
+    s = config["sweep"][wildcards.fea]
+    n = min(s["n_shards"], s["n_ratios"])
+    return expand("results/actuator/sweep/{fea}/shard{shard}.nc", fea=wildcards.fea, shard=range(n))
+
+
 # --- Stage cascade (issue 6) ----------------------------------------------------
 def get_unit_response():
     """Input: the surrogate the cascade plans with (config cascade.surrogate)."""
