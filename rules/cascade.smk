@@ -36,6 +36,7 @@ rule validate_cascade:
         plan=get_validation_plan(),
         table08="resources/table08_planned_pressures_3d.csv",
         table10="resources/table10_experimental_pressures_mean_finger.csv",
+        table07="resources/table07_unit_targets.csv",
         code=code_files("validation_cascade", "cascade"),
     output:
         nc="results/validation/cascade.nc",

@@ -21,7 +21,8 @@ import xarray as xr
 
 from workflow.cascade import PRESSURE_NAMES
 
-__all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "write_cascade_validation", "plot_validation"]
+__all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "compare_unit_moments",
+           "write_cascade_validation", "plot_validation"]
 
 #: Exercises the paper reached, per set (CLARIFICATIONS 18).
 PAPER_REACHED: Mapping[str, Sequence[str]] = {
@@ -85,6 +86,34 @@ def compare_pressures(plan: xr.Dataset, references: Mapping[str, pd.DataFrame],
     return ds
 
 
+def compare_unit_moments(plan: xr.Dataset, table07: str | Path) -> xr.Dataset:
+    """Per-unit moments at the target pose (ours) beside Table 7's, per exercise and group.
+
+    Ours: ``required_moment_nm`` of the joint whose span holds the group (CMC
+    and MCP: MCP).  The paper's came from tip-force measurements divided over
+    eight chambers (CLARIFICATIONS 10), so only signs and ordering compare.
+    """
+    from workflow.cascade import GROUPS, SPANS
+
+    tab = pd.read_csv(table07).set_index("exercise")
+    ex = [str(e) for e in plan["exercise"].values]
+    joint_of = {g: j for j, gs in SPANS.items() for g in gs}
+    ours = np.array([[float(plan["required_moment_nm"].sel(exercise=e, joint=joint_of[g])) for g in GROUPS]
+                     for e in ex])
+    ref = np.array([[float(tab.loc[e, f"M_{g}_Nm"]) if e in tab.index else np.nan for g in GROUPS] for e in ex])
+    return xr.Dataset(
+        {
+            "unit_moment_ours_nm": (("exercise", "group"), ours,
+                                    {"units": "N m", "long_name": "our per-unit moment holding the target pose"}),
+            "unit_moment_table07_nm": (("exercise", "group"), ref,
+                                       {"units": "N m", "long_name": "paper's target moment per unit (Table 7)"}),
+            "unit_moment_sign_agrees": (("exercise", "group"), np.sign(ours) == np.sign(ref),
+                                        {"long_name": "ours and Table 7 have the same sign"}),
+        },
+        coords={"exercise": ex, "group": list(GROUPS)},
+    )
+
+
 def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
     """Our pressures beside the paper's, one panel per exercise."""
     import matplotlib
@@ -114,12 +143,18 @@ def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
 
 def write_cascade_validation(plan_nc: str | Path, tables: Mapping[str, str | Path], out_nc: str | Path, *,
                              config_slice, rule: str = "validate_cascade", plot: str | Path | None = None,
-                             rel_floor_kpa: float = 10.0) -> xr.Dataset:
-    """Read the mean finger's plan and the paper's tables, write ``results/validation/cascade.nc``."""
+                             rel_floor_kpa: float = 10.0, table07: str | Path | None = None) -> xr.Dataset:
+    """Read the mean finger's plan and the paper's tables, write ``results/validation/cascade.nc``.
+
+    ``tables``: {name: pressure table CSV} (Tables 8 and 10); ``table07``: the
+    unit-moment targets, compared when given.
+    """
     from workflow.provenance import write_dataset
 
     plan = xr.load_dataset(plan_nc)
     ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa)
+    if table07 is not None:
+        ds = ds.merge(compare_unit_moments(plan, table07))
     ds.attrs["patient"] = str(plan.attrs.get("patient", ""))
     write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
                   title="Planned pressures against the paper's Tables 8 and 10")
