@@ -543,11 +543,13 @@ def plan_exercise(
 ) -> Plan:
     """Pressures for one exercise (see the module docstring).
 
-    Per span, the least-squares pressures whose bend under the target-pose
-    moment is within ``tol - margin`` of the target; then the coupled forward
-    model checks the pose.  If a joint lands outside the tolerance (the pose,
-    not the target, sets the moments), the span goal is halved and the plan
-    repeated, at most ``max_rounds`` times.
+    Per span, the pressures of least sum of squares whose bend under the
+    target-pose moment is within ``tol - margin`` of the target; then the
+    coupled forward model checks the pose.  If a joint lands outside the
+    tolerance (the pose, not the target, sets the moments), the plan is
+    repeated -- with the moments of the reached pose for spans that cannot
+    reach their target, else with half the span goal -- at most ``max_rounds``
+    times, and the best round is kept.  Angles deg, moments N m, pressures kPa.
     """
     target = np.asarray(target_deg, float)
     limits = None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float))
