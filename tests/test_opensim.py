@@ -120,6 +120,20 @@ def test_passive_rises_with_flexion_and_stays_below_active(original):
         assert 0.2 < -float(active.sel(joint=joint, angle_deg=ang)) < 10.0
 
 
+def test_tone_free_passive_curve_is_a_spring(original):
+    """At activation 0 the passive moment is 0 in the straight finger and rises with flexion."""
+    tf = original["passive_tone_free_moment_nm"]
+    for joint in om.JOINTS:
+        lo, hi = om.JOINT_RANGE_DEG[joint]
+        curve = tf.sel(joint=joint, angle_deg=slice(0, hi)).values
+        assert abs(curve[0]) < 1e-6
+        assert np.all(np.diff(curve) > 0), f"{joint}: the relaxed finger must resist flexion more and more"
+        # The 1 % tone of the paper's passive state pulls towards flexion: 0.01 lies below 0.
+        assert np.all(original["moment_nm"].sel(joint=joint, activation=0.01, angle_deg=slice(0, hi)).values
+                      < curve + 1e-9)
+    assert float(tf.sel(joint="MCP", angle_deg=-45)) < 0  # hyperextension: the flexors resist
+
+
 def test_gravity_moment_palm_down(original, params):
     g = original["gravity_moment_nm"]
     # Palm down, straight finger: its weight flexes the MCP, so holding it needs extension.

@@ -23,6 +23,13 @@ extension moment: negative.  The gravity moment of the segments (hand
 horizontal, palm down) is stored apart in ``gravity_moment_nm`` and added to
 ``moment_nm`` only when ``include_gravity`` is set (issue 6 adds gravity from
 its own segment volumes).
+
+The paper's "passive" state is activation 0.01, and so is ours in
+``moment_nm``; at 0.01 the finger's strong flexors carry a 1 % active tone that
+outweighs the extensors' passive stretch at the PIP and DIP, so those passive
+moments come out negative.  ``passive_tone_free_moment_nm`` is the same curve at
+activation 0 (passive fibre forces only): zero at 0 deg and rising with flexion,
+the torsional spring of a relaxed finger.
 """
 
 from __future__ import annotations
@@ -157,6 +164,7 @@ def sample_model(
     arm = np.full((nf, nm, nj, na), np.nan)
     arm_osim = np.full((nf, nm, nj, na), np.nan)
     status = np.full((nf, nj, na, nact), 2, dtype=np.int8)
+    tone_free = np.full((nf, nj, na), np.nan)
 
     state = model.initSystem()
     coords = model.getCoordinateSet()
@@ -193,7 +201,7 @@ def sample_model(
                     arm[fi, mindex[k], ji, ai] = exc[k] * 1000.0
                     arm_osim[fi, mindex[k], ji, ai] = m.computeMomentArm(state, coord) * 1000.0
                 gravity[fi, ji, ai] = _gravity_holding_moment(bodyset, state, finger, joint, g_vec)
-                for bi, a in enumerate(acts):
+                for bi, a in enumerate([*acts, 0.0]):
                     for m in fmus:
                         m.setActivation(state, float(a))
                     try:
@@ -202,7 +210,11 @@ def sample_model(
                         forces = np.array([m.getTendonForce(state) for m in fmus])
                     except RuntimeError as err:  # OpenSim raises on a failed fibre equilibrium
                         log.warning("%s %s %.1f deg a=%.2f: equilibrium failed: %s", finger, joint, ang, a, err)
-                        status[fi, ji, ai, bi] = 1
+                        if bi < nact:
+                            status[fi, ji, ai, bi] = 1
+                        continue
+                    if bi == nact:  # activation 0: the fibres' passive force alone
+                        tone_free[fi, ji, ai] = -float(np.sum(forces * exc))
                         continue
                     for k in range(len(fmus)):
                         tendon[fi, mindex[k], ji, ai, bi] = forces[k]
@@ -229,6 +241,10 @@ def sample_model(
                              "(other joints at 0 deg)" + (", gravity included" if include_gravity else
                                                           ", muscles only"),
             }),
+            "passive_tone_free_moment_nm": (("finger", "joint", "angle_deg"), tone_free, {
+                "units": "N m",
+                "long_name": "flexion moment a device must apply to hold the joint with every muscle at "
+                             "activation 0 (passive fibre and tendon forces only, no 1 % tone)"}),
             "muscle_moment_nm": (fjaa, muscle_moment, {
                 "units": "N m", "long_name": "net flexion moment of the finger's muscles about the joint"}),
             "gravity_moment_nm": (("finger", "joint", "angle_deg"), gravity, {

@@ -251,6 +251,9 @@ def _add_finger(
         ins_y = -min(2.0 * _PULLEY_REACH * abs(arms[crossed[-1]]), 0.5 * mean_len[last_child])
         mus.addNewPathPoint(f"{mus.getName()}_insertion", bodies[last_child], at(last_child, ins_y, z[crossed[-1]]))
         mus.set_default_fiber_length(float(mp["optimal_fiber_length"]))
+        # OpenSim's default floor of 0.01 would make the paper's "passive" state
+        # (activation 0.01) the lowest possible; 0 allows the tone-free passive curve.
+        mus.set_minimum_activation(0.0)
         model.addForce(mus)
 
 

@@ -87,6 +87,14 @@ def compare(ours: xr.Dataset, design: pd.DataFrame, reference: pd.DataFrame, flo
         if finger in ours["finger"].values and float(angle) in ours["angle_deg"].values:
             ours_v[i] = ours["moment_nm"].sel(run=runs, finger=finger, joint=joint, angle_deg=float(angle),
                                               activation=_ACT[kind]).to_numpy()
+    # Passive responses also against our tone-free passive curve (activation 0), when present.
+    tone_v = np.full((nr, nn), np.nan)
+    if "passive_tone_free_moment_nm" in ours:
+        for i, name in enumerate(responses):
+            finger, kind, joint, angle = name.split("_")
+            if kind == "P" and finger in ours["finger"].values and float(angle) in ours["angle_deg"].values:
+                tone_v[i] = ours["passive_tone_free_moment_nm"].sel(
+                    run=runs, finger=finger, joint=joint, angle_deg=float(angle)).to_numpy()
     abs_err = np.abs(ours_v - ref_v)
     with np.errstate(invalid="ignore", divide="ignore"):
         rel = np.where(np.abs(ref_v) >= floor_nm, (ours_v - ref_v) / np.abs(ref_v), np.nan)
@@ -132,6 +140,15 @@ def compare(ours: xr.Dataset, design: pd.DataFrame, reference: pd.DataFrame, flo
         coords={"response": responses, "run": runs, "dimension": list(DIMENSIONS), "form": list(FORMS)},
     )
     ds["median_magnitude_ratio"] = (("response",), med, {"units": "1", "long_name": "median over runs of |ours|/|reference|"})
+    with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ratio_tf = np.where(np.abs(ref_v) >= floor_nm, np.abs(tone_v) / np.abs(ref_v), np.nan)
+        ds["ours_tone_free"] = (rd, tone_v, {"units": "N m", "long_name": "our passive moment at activation 0 (passive responses)"})
+        ds["median_magnitude_ratio_tone_free"] = (("response",), np.nanmedian(ratio_tf, axis=1), {
+            "units": "1", "long_name": "median over runs of |ours at activation 0| / |reference| (passive responses)"})
+        sign_tf = np.where(np.isfinite(tone_v), np.sign(tone_v) == np.sign(ref_v), np.nan)
+        ds["sign_agreement_fraction_tone_free"] = (("response",), np.nanmean(sign_tf, axis=1), {
+            "units": "1", "long_name": "fraction of runs where our activation-0 passive moment has the reference's sign"})
     ds["sign_agreement_fraction"] = (("response",), sign_ok.mean(axis=1), {"units": "1", "long_name": "fraction of runs with the same sign"})
     return ds
 
@@ -241,6 +258,10 @@ def summary(ds: xr.Dataset) -> str:
         d = ds.sel(response=r)
         sl = "  ".join(f"{float(d.slope_ours.sel(dimension=k)):+.3g}/{float(d.slope_reference.sel(dimension=k)):+.3g}"
                        for k in DIMENSIONS)
+        tf = ""
+        if "median_magnitude_ratio_tone_free" in d and np.isfinite(float(d.median_magnitude_ratio_tone_free)):
+            tf = (f"  tone-free: sign {float(d.sign_agreement_fraction_tone_free):.2f}"
+                  f" ratio {float(d.median_magnitude_ratio_tone_free):.3f}")
         lines.append(f"{r:16s} {float(d.sign_agreement_fraction):.2f}  {float(d.median_magnitude_ratio):6.3f}  {sl}  "
-                     f"{float(d.r2_ours.sel(form='quadratic')):.3f}/{float(d.r2_reference.sel(form='quadratic')):.3f}")
+                     f"{float(d.r2_ours.sel(form='quadratic')):.3f}/{float(d.r2_reference.sel(form='quadratic')):.3f}{tf}")
     return "\n".join(lines)
