@@ -15,6 +15,10 @@ Each is a scikit-learn Pipeline (StandardScaler, model) fitted on the training
 split only.  Targets: ``angle`` (free bending angle per unit, deg) and
 ``moment`` (blocked moment per unit, N m), fitted separately.
 
+The CV uses every converged sample, mirrored ones included (they are data the
+surrogate is trained on; a mirror sits elsewhere in the (P_T, P_B) plane, so it
+does not stand in for its held-out twin).
+
 Choice (`SELECTION_RULE`): the regressor with the smallest mean over folds and
 both targets of the RMSE divided by the target's standard deviation over the
 samples; the choice is made per FE model and recorded in ``surrogate_cv.nc``.
