@@ -17,6 +17,7 @@ include: "rules/common.smk"
 include: "rules/doe.smk"
 include: "rules/musculoskeletal.smk"
 include: "rules/opensim.smk"
+include: "rules/tracking.smk"
 
 
 rule all:

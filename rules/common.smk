@@ -44,7 +44,21 @@ def get_final_output():
     out += expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS)
     # OpenSim backend checked against the authors' export (empty when it is absent).
     out += ["results/validation/musculoskeletal.nc", "results/validation/musculoskeletal.png"]
+    if config["tracking"]["enabled"]:
+        out += expand("results/tracking/{patient}.json", patient=PATIENTS)
     return out
+
+
+def get_tracking_inputs(wildcards):
+    """Input function: what one patient's ledger row reports (the datasets and plots)."""
+    p = wildcards.patient
+    return {
+        "scaling": "results/validation/scaling.nc",
+        "rsm": "results/musculoskeletal/rsm.nc",
+        "rsm_plot": "results/musculoskeletal/rsm_r2.png",
+        "loads": f"results/patients/{p}/joint_loads.nc",
+        "loads_plot": f"results/patients/{p}/joint_loads.png",
+    }
 
 
 def moments_source():
