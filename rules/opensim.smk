@@ -11,7 +11,8 @@ rule opensim_model:
     output:
         "results/musculoskeletal/opensim/finger_reference.osim",
     params:
-        opensim=config["opensim"],
+        fingers=config["opensim"]["fingers"],
+        reference_marker=config["opensim"]["reference_marker"],
     log:
         "logs/opensim/opensim_model.log",
     benchmark:
@@ -28,7 +29,10 @@ rule opensim_sample:
     output:
         "results/musculoskeletal/opensim/run{run}.nc",
     params:
-        opensim=config["opensim"],
+        fingers=config["opensim"]["fingers"],
+        angle_step_deg=config["opensim"]["angle_step_deg"],
+        activations=config["opensim"]["activations"],
+        include_gravity=config["opensim"]["include_gravity"],
         config_slice=cfg("opensim", "scaling", "anthropometry", "design"),
     wildcard_constraints:
         run=r"\d+",

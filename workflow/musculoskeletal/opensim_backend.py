@@ -390,6 +390,8 @@ def write_run(
     ds = sample_run(model_path, factors, int(run), fingers, angle_grid(angle_step_deg), activations, include_gravity)
     marker = str(scaling["marker"].sel(run=int(run)).values)
     ds = ds.assign_coords(marker=marker)
+    # The reference model carries the parameter file's content: hash it with the config slice.
+    config_slice = {"config": config_slice, "reference_model_sha256": _sha256(model_path)}
     n_fail = int((ds["status"] == 1).sum())
     log.info("run %s (%s): %d samples in %.2f s, %d failed equilibria", run, marker,
              int((ds["status"] == 0).sum()), float(ds["wall_time_s"]), n_fail)
@@ -397,6 +399,12 @@ def write_run(
                   title=f"OpenSim finger moments, CCD run {run} ({marker})",
                   source="finger-rehab-workflow generated OpenSim finger model (opensim backend)")
     return ds
+
+
+def _sha256(path: str | Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def write_merged(run_files: Sequence[str | Path], out: str | Path, *, rule: str, config_slice: Any) -> xr.Dataset:

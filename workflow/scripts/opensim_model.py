@@ -3,5 +3,5 @@ from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821
 write_reference_model(snakemake.input.parameters, snakemake.input.scaling, snakemake.output[0],  # noqa: F821
-                      fingers=snakemake.params.opensim["fingers"],  # noqa: F821
-                      reference_marker=snakemake.params.opensim["reference_marker"])  # noqa: F821
+                      fingers=snakemake.params.fingers,  # noqa: F821
+                      reference_marker=snakemake.params.reference_marker)  # noqa: F821
