@@ -29,6 +29,11 @@ spring with stiffness k(P) = M_b(P) / theta_f(P), in N m per degree:
   the ratio is not positive; h is doubled (up to 32 times) while the offset pair
   itself has |theta_f| below the floor (a flat stretch of a KNN surrogate).
 
+Inverse queries find the first sign change of angle - target on a grid and
+refine it by bisection, vectorised over rays/directions.  On a piecewise-constant
+surrogate (KNN) the angle may jump over the target: the answer is then the jump,
+within one step of the staircase.
+
 Vectorised: every function broadcasts its array arguments.  The cascade
 planner calls `UnitModel.angle_deg`, `free_angle_deg` and `blocked_moment_nm`.
 """
@@ -40,7 +45,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
+from scipy.optimize import minimize_scalar
 
 __all__ = [
     "UnitModel",
@@ -194,18 +199,40 @@ def _ray_points(t, ratio):
     return t * top, t * bot
 
 
-def _first_root(g: Callable[[float], float], grid: np.ndarray, values: np.ndarray, xtol: float) -> float:
-    """Smallest root of g on the grid's first sign change, refined by Brent's method; NaN if none."""
-    if values[0] == 0.0:
-        return float(grid[0])
-    s = np.sign(values)
-    idx = np.flatnonzero((s[:-1] * s[1:] <= 0) & np.isfinite(values[:-1]) & np.isfinite(values[1:]))
-    if idx.size == 0:
-        return np.nan
-    i = int(idx[0])
-    if values[i + 1] == 0.0:
-        return float(grid[i + 1])
-    return float(brentq(g, grid[i], grid[i + 1], xtol=xtol))
+def _first_roots(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], grid: np.ndarray, values: np.ndarray,
+                 xtol: float) -> np.ndarray:
+    """Per row, the smallest root of fn at the row's first sign change on its grid; NaN if none.
+
+    ``grid`` and ``values`` are (rows, n); ``fn(x, rows)`` evaluates the rows'
+    functions at x (rows,) in one vectorised call.  Refined by bisection on all
+    rows at once (robust on the steps of a KNN surrogate) to ``xtol``.
+    """
+    grid = np.asarray(grid, float)
+    values = np.asarray(values, float)
+    sign = np.sign(values)
+    change = (sign[:, :-1] * sign[:, 1:] <= 0) & np.isfinite(values[:, :-1]) & np.isfinite(values[:, 1:])
+    has = change.any(axis=1)
+    rows = np.flatnonzero(has)
+    root = np.full(grid.shape[0], np.nan)
+    if rows.size == 0:
+        return root
+    j = np.argmax(change[rows], axis=1)
+    lo, hi = grid[rows, j].copy(), grid[rows, j + 1].copy()
+    f_lo, f_hi = values[rows, j].copy(), values[rows, j + 1].copy()
+    width = float(np.max(hi - lo))
+    n_iter = int(np.ceil(np.log2(max(width, xtol) / xtol))) + 1
+    for _ in range(n_iter):
+        mid = 0.5 * (lo + hi)
+        f_mid = np.asarray(fn(mid, rows), float)
+        left = np.sign(f_mid) * np.sign(f_lo) <= 0  # root in [lo, mid]
+        hi = np.where(left, mid, hi)
+        f_hi = np.where(left, f_mid, f_hi)
+        lo = np.where(left, lo, mid)
+        f_lo = np.where(left, f_lo, f_mid)
+    out = 0.5 * (lo + hi)
+    out = np.where(f_lo == 0.0, lo, out)  # an exact zero at the grid's start stays there
+    root[rows] = out
+    return root
 
 
 def pressures_on_ray(model: UnitModel, angle_deg, m_ext_nm, ratio, *, p_max_kpa: float | None = None,
@@ -218,22 +245,23 @@ def pressures_on_ray(model: UnitModel, angle_deg, m_ext_nm, ratio, *, p_max_kpa:
     (`INVERSE_STATUS`).
     """
     p_max = model.p_max_kpa if p_max_kpa is None else p_max_kpa
-    a, m, r = np.broadcast_arrays(np.asarray(angle_deg, float), np.asarray(m_ext_nm, float), np.asarray(ratio, float))
-    t = np.linspace(0.0, p_max, n_grid)
-    pt_grid, pb_grid = _ray_points(t[None, :], r.ravel()[:, None])
-    vals = model.angle_deg(pt_grid, pb_grid, m.ravel()[:, None]) - a.ravel()[:, None]
-    t_root = np.full(a.size, np.nan)
-    for i in range(a.size):
-        def g(x, i=i):
-            pt, pb = _ray_points(x, r.flat[i])
-            return float(model.angle_deg(pt, pb, m.flat[i]) - a.flat[i])
+    a, m, r = (x.ravel() for x in np.broadcast_arrays(np.asarray(angle_deg, float), np.asarray(m_ext_nm, float),
+                                                       np.asarray(ratio, float)))
+    shape = np.broadcast_shapes(np.shape(angle_deg), np.shape(m_ext_nm), np.shape(ratio))
+    t = np.broadcast_to(np.linspace(0.0, p_max, n_grid), (a.size, n_grid))
+    pt_grid, pb_grid = _ray_points(t, r[:, None])
+    vals = model.angle_deg(pt_grid, pb_grid, m[:, None]) - a[:, None]
 
-        t_root[i] = _first_root(g, t, vals[i], xtol_kpa)
-    pt, pb = _ray_points(t_root, r.ravel())
+    def fn(x, rows):
+        pt, pb = _ray_points(x, r[rows])
+        return model.angle_deg(pt, pb, m[rows]) - a[rows]
+
+    t_root = _first_roots(fn, t, vals, xtol_kpa)
+    pt, pb = _ray_points(t_root, r)
     return {
-        "p_top_kpa": pt.reshape(a.shape),
-        "p_bottom_kpa": pb.reshape(a.shape),
-        "status": np.where(np.isnan(t_root), 1, 0).reshape(a.shape),
+        "p_top_kpa": pt.reshape(shape),
+        "p_bottom_kpa": pb.reshape(shape),
+        "status": np.where(np.isnan(t_root), 1, 0).reshape(shape),
     }
 
 
@@ -243,14 +271,13 @@ def _iso(model: UnitModel, angle_deg: float, m_ext_nm: float, p_max: float, phi:
     frac = np.linspace(0.0, 1.0, n_grid)
     edge = p_max / np.maximum(np.cos(phi), np.sin(phi))  # rho at the edge of [0, p_max]^2
     rho = frac[None, :] * edge[:, None]
-    vals = model.angle_deg(rho * np.cos(phi)[:, None], rho * np.sin(phi)[:, None], m_ext_nm) - angle_deg
-    root = np.full(phi.size, np.nan)
-    for i, ph in enumerate(phi):
-        def g(x, ph=ph):
-            return float(model.angle_deg(x * np.cos(ph), x * np.sin(ph), m_ext_nm) - angle_deg)
+    c, s = np.cos(phi), np.sin(phi)
+    vals = model.angle_deg(rho * c[:, None], rho * s[:, None], m_ext_nm) - angle_deg
 
-        root[i] = _first_root(g, rho[i], vals[i], xtol_kpa)
-    return root
+    def fn(x, rows):
+        return model.angle_deg(x * c[rows], x * s[rows], m_ext_nm) - angle_deg
+
+    return _first_roots(fn, rho, vals, xtol_kpa)
 
 
 def iso_angle_pairs(model: UnitModel, angle_deg: float, m_ext_nm: float = 0.0, *, p_max_kpa: float | None = None,
