@@ -326,7 +326,8 @@ def sample_run(
 
 def merge_runs(datasets: Sequence[xr.Dataset]) -> xr.Dataset:
     """Stack per-run datasets along ``run`` (sorted) into the ``moments.nc`` layout."""
-    ds = xr.concat(list(datasets), dim="run", combine_attrs="drop_conflicts")
+    ds = xr.concat(list(datasets), dim="run", data_vars="all", coords="different", compat="equals",
+                   join="outer", combine_attrs="drop_conflicts")
     ds = ds.sortby("run")
     ds["run"].attrs.update({"long_name": "CCD run number"})
     return ds
