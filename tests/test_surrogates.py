@@ -120,3 +120,15 @@ def test_fit_save_load_roundtrip(tmp_path, name):
     np.testing.assert_array_equal(back.angle_deg(pt, pb), a)
     np.testing.assert_array_equal(back.moment_nm(pt, pb), s.moment_nm(pt, pb))
     assert back.p_max_kpa == 300.0 and back.regressor == name
+
+
+def test_density_study_error_falls_with_density():
+    dense = response(11, 12)
+    st = surrogates.density_study(dense, [(3, 3), (6, 6), (11, 4)], regressors=("knn", "rbf"))
+    rm = st["rmse"].sel(target="angle")
+    assert float(rm.sel(design="6x6", regressor="rbf")) < float(rm.sel(design="3x3", regressor="rbf"))
+    assert float(rm.sel(design="6x6", regressor="knn")) < float(rm.sel(design="3x3", regressor="knn"))
+    # 3x3 trains on 3 rays x 3 scales (+ 2 x 3 mirrors)
+    assert int(st["n_train"].sel(design="3x3")) == 15
+    with pytest.raises(ValueError, match="sub-grid"):
+        surrogates.density_study(dense, [(4, 3)])

@@ -65,6 +65,7 @@ __all__ = [
     "load_surrogate",
     "write_surrogate_cv",
     "write_surrogate",
+    "density_study",
 ]
 
 log = logging.getLogger(__name__)
@@ -330,6 +331,52 @@ def load_surrogate(path: str | Path) -> Surrogate:
 def as_callables(surrogate: Surrogate) -> tuple[Callable, Callable]:
     """(free_angle_deg, blocked_moment_nm) callables for `workflow.unit_model.UnitModel`."""
     return surrogate.angle_deg, surrogate.moment_nm
+
+
+def density_study(response: xr.Dataset, designs: Sequence[tuple[int, int]], *, regressors: Sequence[str] = ("knn",),
+                  k: int = 4, random_state: int = 0) -> xr.Dataset:
+    """How dense a sweep the surrogates need: fit on coarser sub-grids of a dense sweep, test on the rest.
+
+    ``response`` is a merged sweep (points carry ``ratio`` and ``scale`` of their
+    solved ray).  Each design (n_ratios, n_pressures) keeps the points whose ray
+    ratio is on linspace(0, 1, n_ratios) and whose scale is on the multiples of
+    1/n_pressures (mirrors included); it must be a sub-grid of the dense one.
+    Returns ``rmse``, ``mae``, ``max_abs_error`` and ``n_train`` on
+    (design, regressor, target), measured on the dense points left out.
+    """
+    ok = response["status"].values == 0
+    ratio, scale = response["ratio"].values, response["scale"].values
+    X = np.column_stack([response["p_top_kpa"].values, response["p_bottom_kpa"].values])
+    names = [f"{nr}x{npr}" for nr, npr in designs]
+    shape = (len(designs), len(regressors), len(TARGETS))
+    out = {m: np.full(shape, np.nan) for m in ("rmse", "mae", "max_abs_error")}
+    n_train = np.zeros(len(designs), dtype=np.int32)
+    for i, (nr, npr) in enumerate(designs):
+        on_r = np.isclose(ratio[:, None], np.linspace(0.0, 1.0, nr)[None, :], atol=1e-9).any(axis=1)
+        on_s = np.isclose(scale[:, None], (np.arange(1, npr + 1) / npr)[None, :], atol=1e-9).any(axis=1)
+        train = ok & on_r & on_s
+        test = ok & ~(on_r & on_s)
+        n_train[i] = int(train.sum())
+        if not (np.unique(ratio[on_r]).size == nr and np.unique(scale[on_s]).size == npr):
+            raise ValueError(f"design {nr}x{npr} is not a sub-grid of the sweep")
+        if test.sum() == 0 or train.sum() < max(k, 3):
+            continue
+        for j, name in enumerate(regressors):
+            for t, (var, _) in enumerate(TARGETS.values()):
+                y = response[var].values
+                m = make_regressor(name, k=k, random_state=random_state)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    m.fit(X[train], y[train])
+                err = m.predict(X[test]) - y[test]
+                out["rmse"][i, j, t] = np.sqrt(np.mean(err**2))
+                out["mae"][i, j, t] = np.mean(np.abs(err))
+                out["max_abs_error"][i, j, t] = np.max(np.abs(err))
+    dims = ("design", "regressor", "target")
+    ds = xr.Dataset({m: (dims, v) for m, v in out.items()},
+                    coords={"design": names, "regressor": list(regressors), "target": list(TARGETS)})
+    ds["n_train"] = ("design", n_train)
+    return ds
 
 
 def write_surrogate_cv(response_2d: str | Path, response_3d: str | Path, out: str | Path, *, k: int, folds: int,
