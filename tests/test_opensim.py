@@ -275,3 +275,22 @@ def test_run_file_roundtrip_and_merge(params, table, tmp_path):
     # Outside a joint's range: NaN, status "not_sampled".
     assert np.isnan(float(back["moment_nm"].sel(run=9, finger="F3", joint="DIP", angle_deg=90.0, activation=1.0)))
     assert int(back["status"].sel(run=9, finger="F3", joint="DIP", angle_deg=90.0, activation=1.0)) == 2
+
+
+def test_patient_from_coded_levels_only(params, config):
+    """A patient given only as coded levels (the paper's altered finger, CLARIFICATIONS 19) is sampled
+    with the scale factors the DOE stage computes; the centre point reproduces the mean finger."""
+    from workflow import doe
+
+    anth = config["anthropometry"]
+    levels = pd.DataFrame({"depth": [0.0, 0.5], "length": [0.0, 0.5], "breadth": [0.0, 0.5]}, index=[0, 1])
+    scale = doe.scale_factors(levels, config["scaling"], anth["measures"], anth.get("coded_unit_sd", 1.0))
+    sf = [{b: tuple(float(v) for v in scale.sel(run=i, body=b).values) for b in om.BODIES} for i in (0, 1)]
+    mean = ob.sample_finger(params, sf[0], [0.0, 90.0], (0.01, 1.0), ("F3",), reference_scale=sf[0])
+    altered = ob.sample_finger(params, sf[1], [0.0, 90.0], (0.01, 1.0), ("F3",), reference_scale=sf[0])
+    arm0 = mean["moment_arm_mm"].sel(finger="F3", muscle="FDP", joint="PIP", angle_deg=0.0)
+    assert float(arm0) == pytest.approx(params["fingers"]["F3"]["muscles"]["FDP"]["moment_arms_mm"]["PIP"], rel=1e-3)
+    arm1 = altered["moment_arm_mm"].sel(finger="F3", muscle="FDP", joint="PIP", angle_deg=0.0)
+    # The PIP pulley sits on the PP: the deeper finger's arm grows with the PP's depth factor.
+    assert float(arm1 / arm0) == pytest.approx(sf[1]["PP"][2] / sf[0]["PP"][2], rel=5e-3)
+    assert np.all(np.isfinite(altered["moment_nm"].sel(angle_deg=90.0, joint=["MCP", "PIP"])))
