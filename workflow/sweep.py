@@ -300,7 +300,7 @@ def merge_shards(shards: Iterable[xr.Dataset | str | Path], *, n_ratios: int, n_
     d = {k: v[order] for k, v in d.items()}
     n = order.size
     # Mirror every point strictly below the diagonal; the r = 1 ray is its own mirror.
-    twin = np.flatnonzero(d["p_bottom_kpa"] < d["p_top_kpa"])
+    twin = np.flatnonzero(d["ratio"] < 1.0)  # by the design, not by comparing returned floats
     m = {k: v[twin].copy() for k, v in d.items()}
     m["p_top_kpa"], m["p_bottom_kpa"] = d["p_bottom_kpa"][twin], d["p_top_kpa"][twin]
     m["bending_angle_deg"] = -d["bending_angle_deg"][twin]
