@@ -153,3 +153,20 @@ def test_finite_everywhere_on_a_knn_surrogate():
     th = um.angle_deg(g[:, None], g[None, :], 0.004)
     assert np.all(np.isfinite(th))
     assert np.all(um.stiffness_nm_per_deg(g[:, None], g[None, :]) > 0)
+
+
+def test_verification_points_and_dataset(model):
+    pts = unit_model.verification_points(model, [150.0, 300.0], [0.0, 30.0], fractions=(0.0, 0.5, 1.0))
+    assert pts["m_ext_nm"].shape == (6,)
+    np.testing.assert_allclose(pts["predicted_deg"][pts["fraction"] == 1.0], 0.0, atol=1e-10)
+    np.testing.assert_allclose(pts["predicted_deg"][pts["fraction"] == 0.0], free([150.0, 300.0], [0.0, 30.0]))
+    # FEA stand-in: a curve bent with c = 0.2; one run failed
+    fea = model.with_shape(0.2).angle_deg(pts["p_top_kpa"], pts["p_bottom_kpa"], pts["m_ext_nm"])
+    status = np.array([0, 0, 0, 0, 1, 0])
+    ds = unit_model.verification_dataset(model, pts["p_top_kpa"], pts["p_bottom_kpa"], pts["m_ext_nm"], fea, status)
+    assert np.isnan(ds["error_deg"].values[4])
+    mid = pts["fraction"] == 0.5
+    assert np.all(np.abs(ds["error_deg"].values[mid & (status == 0)]) > 0.01)  # the linear spring misses the bend
+    assert ds.attrs["max_abs_error_deg"] > 0.01
+    for v in ds.data_vars:
+        assert ds[v].attrs["units"] and ds[v].attrs["long_name"]

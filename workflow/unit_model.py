@@ -52,6 +52,8 @@ __all__ = [
     "load_unit_model",
     "fit_shape",
     "verify",
+    "verification_points",
+    "verification_dataset",
     "pressures_on_ray",
     "iso_angle_pairs",
     "min_norm_pressures",
@@ -188,6 +190,53 @@ def verify(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg) -
         "max_abs_error_deg": float(np.nanmax(np.abs(err))),
         "rmse_deg": float(np.sqrt(np.nanmean(err**2))),
     }
+
+
+def verification_points(model: UnitModel, p_top_kpa, p_bottom_kpa, fractions=(0.25, 0.5, 0.75)) -> dict[str, np.ndarray]:
+    """End moments at which to check the model by FEA: the given fractions of each pair's blocked moment.
+
+    Returns flat arrays ``p_top_kpa``, ``p_bottom_kpa``, ``fraction``, ``m_ext_nm``
+    (pairs x fractions) and the model's ``predicted_deg`` there.
+    """
+    pt, pb = (np.ravel(x) for x in np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float)))
+    f = np.asarray(fractions, float)
+    PT, F = np.meshgrid(pt, f, indexing="ij")
+    PB = np.meshgrid(pb, f, indexing="ij")[0]
+    m = F * model.blocked_moment_nm(PT, PB)
+    return {"p_top_kpa": PT.ravel(), "p_bottom_kpa": PB.ravel(), "fraction": F.ravel(), "m_ext_nm": m.ravel(),
+            "predicted_deg": model.angle_deg(PT, PB, m).ravel()}
+
+
+def verification_dataset(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg, status=None):
+    """Model against FEA runs at prescribed end moments, as an xarray Dataset on ``check``.
+
+    ``status`` (0 = converged) marks FEA runs to leave out of the error
+    summary (attrs ``max_abs_error_deg``, ``rmse_deg``).
+    """
+    import xarray as xr
+
+    pt, pb, m, a = (np.ravel(np.asarray(x, float)) for x in np.broadcast_arrays(p_top_kpa, p_bottom_kpa, m_ext_nm,
+                                                                                 angle_fea_deg))
+    st = np.zeros(pt.size, dtype=np.int32) if status is None else np.ravel(np.asarray(status, dtype=np.int32))
+    pred = model.angle_deg(pt, pb, m)
+    err = np.where(st == 0, pred - a, np.nan)
+    ds = xr.Dataset(
+        {
+            "m_ext_nm": ("check", m, {"units": "N m", "long_name": "prescribed end moment per unit (resisting, + = flexion)"}),
+            "angle_fea_deg": ("check", a, {"units": "degree", "long_name": "FEA angle per unit under the end moment"}),
+            "angle_model_deg": ("check", pred, {"units": "degree", "long_name": "unit-model angle per unit"}),
+            "error_deg": ("check", err, {"units": "degree", "long_name": "model minus FEA (NaN where FEA failed)"}),
+            "fea_status": ("check", st, {"units": "1", "long_name": "FEA status (0 = converged)"}),
+        },
+        coords={"check": np.arange(pt.size),
+                "p_top_kpa": ("check", pt, {"units": "kPa", "long_name": "top chamber pressure P_T"}),
+                "p_bottom_kpa": ("check", pb, {"units": "kPa", "long_name": "bottom chamber pressure P_B"})},
+    )
+    ok = np.isfinite(err)
+    ds.attrs["max_abs_error_deg"] = float(np.max(np.abs(err[ok]))) if ok.any() else np.nan
+    ds.attrs["rmse_deg"] = float(np.sqrt(np.mean(err[ok] ** 2))) if ok.any() else np.nan
+    ds.attrs["shape_c"] = float(model.shape_c)
+    return ds
 
 
 # -- inverse queries --------------------------------------------------------
