@@ -173,6 +173,11 @@ def plot_validation(ds: xr.Dataset, out: str | Path) -> Path:
         a.scatter(r[same], o[same], marker=marker, s=12, label=f"{'passive' if kind == '_P_' else 'active'}, same sign")
         a.scatter(r[~same], o[~same], marker=marker, s=12, facecolors="none", edgecolors="k",
                   label=f"{'passive' if kind == '_P_' else 'active'}, opposite sign")
+    if "ours_tone_free" in ds:
+        tf = np.abs(ds["ours_tone_free"].values)
+        ok = np.isfinite(tf)
+        a.scatter(np.abs(ds["reference"].values)[ok], tf[ok], marker="^", s=12, color="C2",
+                  label="passive at activation 0 (tone-free)")
     lims = [1e-4, 20]
     a.plot(lims, lims, "k--", lw=0.8)
     a.set(xscale="log", yscale="log", xlim=lims, ylim=lims, xlabel="|reference| (ARMS export), N m",
