@@ -146,6 +146,14 @@ def test_gravity_moment_palm_down(original, params):
                                                                    rel=1e-6)
 
 
+def test_include_gravity_adds_the_holding_moment(params, table, original):
+    ref = factors(table, "Original")
+    with_g = ob.sample_finger(params, ref, original["angle_deg"].values, (0.01, 1.0), ("F3",), ref,
+                              include_gravity=True).sel(finger="F3")
+    np.testing.assert_allclose(with_g["moment_nm"], original["moment_nm"] + original["gravity_moment_nm"],
+                               rtol=1e-6, atol=1e-9)
+
+
 def test_opensim_scaling_moves_geometry_and_depth_sets_moment_arms(params, table):
     ref = factors(table, "Original")
     base = om.build_model(params, ("F3",), ref)
