@@ -2,8 +2,8 @@
 
 For each exercise and joint: the passive moment at the target angle (0 at a
 0 deg target by definition, CLARIFICATIONS 14) with its prediction interval;
-per joint the active safety limit = the active moment at the joint's largest
-target angle.  All moments in N m, positive = flexion.
+per joint the active safety limit = the magnitude of the active moment at the
+joint's largest target angle.  All moments in N m, positive = flexion.
 """
 
 from __future__ import annotations
@@ -86,8 +86,13 @@ def joint_loads(
         if not angles:
             continue
         limit_angle[j] = angles[0]
-        (m, l, _), form = _predict(response_name(finger, 1.0, joint, angles[0]))
-        limit[j], limit_lo[j] = m, l
+        (m, l, h), form = _predict(response_name(finger, 1.0, joint, angles[0]))
+        # A limit is a magnitude: a backend may report the active moment with the
+        # sign of the device's hold (negative when the flexors win), the authors'
+        # export as a positive number. The conservative bound is the smaller magnitude
+        # within the prediction interval (0 if the interval straddles zero).
+        limit[j] = abs(m)
+        limit_lo[j] = 0.0 if l <= 0 <= h else min(abs(l), abs(h))
     ds = xr.Dataset(
         {
             "x": ("dimension", [x[f] for f in doe.FACTORS], {"units": "1", "long_name": "coded finger dimension"}),
@@ -95,8 +100,8 @@ def joint_loads(
             "passive_moment_lo_nm": (("exercise", "joint"), lo, {"units": "N m", "long_name": f"lower {100 * (1 - prediction_alpha):g} % prediction bound of the passive moment"}),
             "passive_moment_hi_nm": (("exercise", "joint"), hi, {"units": "N m", "long_name": f"upper {100 * (1 - prediction_alpha):g} % prediction bound of the passive moment"}),
             "rsm_form": (("exercise", "joint"), form_used.astype(str), {"long_name": "response-surface form used"}),
-            "active_limit_nm": ("joint", limit, {"units": "N m", "long_name": "active safety limit: active moment at the joint's largest target angle"}),
-            "active_limit_lo_nm": ("joint", limit_lo, {"units": "N m", "long_name": "lower prediction bound of the active limit (conservative limit)"}),
+            "active_limit_nm": ("joint", limit, {"units": "N m", "long_name": "active safety limit: magnitude of the active moment at the joint's largest target angle"}),
+            "active_limit_lo_nm": ("joint", limit_lo, {"units": "N m", "long_name": "smallest magnitude of the active moment within its prediction interval (conservative limit)"}),
             "active_limit_angle_deg": ("joint", limit_angle, {"units": "degree", "long_name": "angle at which the active limit is read"}),
             "target_angle_deg": (("exercise", "joint"), np.array([[float(exercises[e][j.lower()]) for j in JOINTS] for e in ex_names]), {"units": "degree", "long_name": "target joint angle (Table 1)"}),
             "in_design_range": ((), flags["in_sphere"] and flags["in_box"], {"long_name": "coded levels inside the CCD sphere (||x|| <= 1, |x_i| <= 1)"}),
