@@ -24,12 +24,20 @@ horizontal, palm down) is stored apart in ``gravity_moment_nm`` and added to
 ``moment_nm`` only when ``include_gravity`` is set (issue 6 adds gravity from
 its own segment volumes).
 
+The passive joint structures (one ``CoordinateLimitForce`` per joint, see
+``opensim_model``) are part of the device moment: ``moment_nm`` = -(muscle
+moment + joint-structure moment); the latter is stored alone in
+``joint_structure_moment_nm``.  ``Model.scale`` leaves coordinate forces alone,
+so :func:`scale_model` scales their stiffness by the joint's breadth x depth^2.
+
 The paper's "passive" state is activation 0.01, and so is ours in
-``moment_nm``; at 0.01 the finger's strong flexors carry a 1 % active tone that
-outweighs the extensors' passive stretch at the PIP and DIP, so those passive
-moments come out negative.  ``passive_tone_free_moment_nm`` is the same curve at
-activation 0 (passive fibre forces only): zero at 0 deg and rising with flexion,
-the torsional spring of a relaxed finger.
+``moment_nm``.  At 0.01 the finger's strong flexors carry a 1 % active tone:
+the straight finger needs a small extension moment to stay straight (the relaxed
+finger rests flexed); beyond that resting angle the joint structures and the
+stretched antagonists win and the passive moment is positive and rises with
+flexion.  ``passive_tone_free_moment_nm`` is the same curve at activation 0
+(passive fibre forces and joint structures, no tone): zero at 0 deg and rising
+with flexion, the torsional spring of a relaxed finger.
 """
 
 from __future__ import annotations
@@ -104,8 +112,34 @@ def scale_model(model, scale_factors: Mapping[str, Sequence[float]], fingers: Se
     # preserveMassDist=False: masses follow the segments' volume change.
     if not model.scale(state, scale_set, False, -1.0):
         raise RuntimeError("OpenSim Model.scale failed")
+    _scale_joint_structures(model, scale_factors, fingers)
     model.initSystem()
     return model
+
+
+def _joint_structures(model, finger: str) -> dict:
+    """The finger's passive joint-structure forces (``CoordinateLimitForce``) by joint (absent ones left out)."""
+    osim = om._opensim()
+    forces = model.updForceSet()
+    out = {}
+    for joint in om.JOINTS:
+        name = om.joint_structure_name(finger, joint)
+        if forces.contains(name):
+            out[joint] = osim.CoordinateLimitForce.safeDownCast(forces.get(name))
+    return out
+
+
+def _scale_joint_structures(model, scale_factors: Mapping[str, Sequence[float]], fingers: Sequence[str]) -> None:
+    """Scale the joint-structure stiffnesses by breadth x depth^2 of each joint (``om.joint_size_factor``).
+
+    ``Model.scale`` leaves coordinate forces alone; the reference model holds
+    the published stiffness divided by the reference run's factor.
+    """
+    for finger in fingers:
+        for joint, clf in _joint_structures(model, finger).items():
+            f = om.joint_size_factor(scale_factors, joint)
+            clf.set_upper_stiffness(clf.get_upper_stiffness() * f)
+            clf.set_lower_stiffness(clf.get_lower_stiffness() * f)
 
 
 def _finger_muscles(model, finger: str) -> list:
@@ -165,6 +199,7 @@ def sample_model(
     arm_osim = np.full((nf, nm, nj, na), np.nan)
     status = np.full((nf, nj, na, nact), 2, dtype=np.int8)
     tone_free = np.full((nf, nj, na), np.nan)
+    structures = np.full((nf, nj, na), np.nan)
 
     state = model.initSystem()
     coords = model.getCoordinateSet()
@@ -175,6 +210,7 @@ def sample_model(
         fmus = _finger_muscles(model, finger)
         mindex = [muscle_names.index(m.getName().split("_", 1)[1]) for m in fmus]
         fcoords = [coords.get(om.joint_coordinate_name(finger, j)) for j in om.JOINTS]
+        fstruct = _joint_structures(model, finger)
         for ji, joint in enumerate(om.JOINTS):
             lo, hi = om.JOINT_RANGE_DEG[joint]
             coord = fcoords[ji]
@@ -201,6 +237,12 @@ def sample_model(
                     arm[fi, mindex[k], ji, ai] = exc[k] * 1000.0
                     arm_osim[fi, mindex[k], ji, ai] = m.computeMomentArm(state, coord) * 1000.0
                 gravity[fi, ji, ai] = _gravity_holding_moment(bodyset, state, finger, joint, g_vec)
+                # Passive joint structures: the device balances their (generalised) moment.
+                if joint in fstruct:
+                    model.realizeVelocity(state)
+                    structures[fi, ji, ai] = -float(fstruct[joint].calcLimitForce(state))
+                else:
+                    structures[fi, ji, ai] = 0.0
                 for bi, a in enumerate([*acts, 0.0]):
                     for m in fmus:
                         m.setActivation(state, float(a))
@@ -213,8 +255,8 @@ def sample_model(
                         if bi < nact:
                             status[fi, ji, ai, bi] = 1
                         continue
-                    if bi == nact:  # activation 0: the fibres' passive force alone
-                        tone_free[fi, ji, ai] = -float(np.sum(forces * exc))
+                    if bi == nact:  # activation 0: the fibres' passive force and the joint structures
+                        tone_free[fi, ji, ai] = -float(np.sum(forces * exc)) + structures[fi, ji, ai]
                         continue
                     for k in range(len(fmus)):
                         tendon[fi, mindex[k], ji, ai, bi] = forces[k]
@@ -222,7 +264,7 @@ def sample_model(
                     status[fi, ji, ai, bi] = 0
                 coord.setValue(state, 0.0, False)
 
-    device = -muscle_moment
+    device = -muscle_moment + structures[..., None]
     if include_gravity:
         device = device + gravity[..., None]
     coords_ = {
@@ -238,15 +280,20 @@ def sample_model(
             "moment_nm": (fjaa, device, {
                 "units": "N m",
                 "long_name": "flexion moment an external device must apply to hold the joint "
-                             "(other joints at 0 deg)" + (", gravity included" if include_gravity else
-                                                          ", muscles only"),
+                             "(other joints at 0 deg; muscles and passive joint structures"
+                             + (", gravity included)" if include_gravity else ", gravity excluded)"),
             }),
             "passive_tone_free_moment_nm": (("finger", "joint", "angle_deg"), tone_free, {
                 "units": "N m",
                 "long_name": "flexion moment a device must apply to hold the joint with every muscle at "
-                             "activation 0 (passive fibre and tendon forces only, no 1 % tone)"}),
+                             "activation 0 (passive fibre and tendon forces and joint structures, no 1 % tone)"}),
+            "joint_structure_moment_nm": (("finger", "joint", "angle_deg"), structures, {
+                "units": "N m",
+                "long_name": "flexion moment a device must apply against the passive joint structures "
+                             "(capsule, ligaments, skin; included in moment_nm)"}),
             "muscle_moment_nm": (fjaa, muscle_moment, {
-                "units": "N m", "long_name": "net flexion moment of the finger's muscles about the joint"}),
+                "units": "N m", "long_name": "net flexion moment of the finger's muscles about the joint "
+                                            "(joint structures excluded)"}),
             "gravity_moment_nm": (("finger", "joint", "angle_deg"), gravity, {
                 "units": "N m",
                 "long_name": "flexion moment needed to hold the segments against gravity (hand horizontal, palm down)"}),

@@ -25,6 +25,13 @@ tendon held by its pulley.  Extrinsic muscles (FDS, FDP, EDC) originate on
 ground ``forearm_length_mm`` proximal of the MCP (the forearm is not scaled);
 the lumbrical originates on the palmar metacarpal.
 
+Passive joint structures (capsule, collateral ligaments, volar plate, skin):
+one OpenSim ``CoordinateLimitForce`` per joint (``{finger}_{joint}_joint_structures``)
+with both limits at the neutral angle, i.e. a linear spring with the published
+in-vivo passive stiffness of the joint (``joint_structures`` in the parameter
+file), scaled per CCD run by the joint's breadth x depth^2
+(:func:`joint_size_factor`).
+
 The *reference* (unscaled) model is the mean finger divided, axis by axis, by
 the scale factors of the CCD's ``Original`` run: the paper scaled a generic
 model whose marker distances are not published, so we infer it from that row
@@ -58,6 +65,9 @@ __all__ = [
     "write_model",
     "joint_coordinate_name",
     "muscle_name",
+    "joint_structure_name",
+    "joint_structure_stiffness",
+    "joint_size_factor",
 ]
 
 BODIES = ("MC", "PP", "MP", "DP")
@@ -85,6 +95,64 @@ def joint_coordinate_name(finger: str, joint: str) -> str:
 def muscle_name(finger: str, muscle: str) -> str:
     """Name of ``muscle`` (e.g. ``FDP``) of ``finger`` in the model (e.g. ``F3_FDP``)."""
     return f"{finger}_{muscle}"
+
+
+def joint_structure_name(finger: str, joint: str) -> str:
+    """Name of the passive joint-structure force of ``joint`` of ``finger`` (e.g. ``F3_PIP_joint_structures``)."""
+    return f"{finger}_{joint}_joint_structures"
+
+
+def joint_size_factor(scale: Mapping[str, Sequence[float]], joint: str) -> float:
+    """Factor by which a joint's passive-structure stiffness scales with the segments' scale factors.
+
+    The capsule, collateral ligaments, volar plate and skin span the joint: a
+    tissue band of cross-section ~ joint breadth x joint depth, stretched at a
+    lever arm ~ joint depth by a strain ~ (depth x angle) / (tissue length ~
+    depth), so the moment per radian scales as breadth x depth^2.  Joint breadth
+    and depth are the geometric means of the two adjacent segments', hence
+    ``sqrt(sX_p sX_c) * sZ_p * sZ_c`` (p, c = parent and child body).
+    """
+    parent, child = JOINT_PARENT_CHILD[joint]
+    sxp, _, szp = (float(v) for v in scale[parent])
+    sxc, _, szc = (float(v) for v in scale[child])
+    return math.sqrt(sxp * sxc) * szp * szc
+
+
+def _joint_breadth_depth2(params: Mapping[str, Any], finger: str, joint: str) -> float:
+    """breadth x depth^2 (mm^3) of a joint of ``finger``: geometric means of the adjacent segments' dimensions."""
+    seg = params["fingers"][finger]["segments_mm"]
+    parent, child = JOINT_PARENT_CHILD[joint]
+    b = math.sqrt(seg[parent]["breadth"] * seg[child]["breadth"])
+    d2 = seg[parent]["depth"] * seg[child]["depth"]
+    return b * d2
+
+
+def joint_structure_stiffness(params: Mapping[str, Any], finger: str) -> dict[str, dict[str, float]]:
+    """Passive joint-structure stiffness of each joint of ``finger`` at its configured (mean) size, N m/rad.
+
+    ``{joint: {"flexion": k_f, "extension": k_e}}`` from the ``joint_structures``
+    section of the parameter file.  A joint given as ``derived_from: PIP``
+    takes that joint's published stiffness times the ratio of the joints'
+    breadth x depth^2 (:func:`joint_size_factor`'s scaling law, applied between
+    joints of the mean finger).  Empty when the section is absent.
+    """
+    spec = params.get("joint_structures") or {}
+    joints = spec.get("joints") or {}
+    out: dict[str, dict[str, float]] = {}
+    for joint in JOINTS:
+        js = joints.get(joint)
+        if js is None:
+            continue
+        if "derived_from" in js:
+            src = joints[js["derived_from"]]
+            ratio = _joint_breadth_depth2(params, finger, joint) / _joint_breadth_depth2(params, finger, js["derived_from"])
+            kf = float(src["stiffness_nm_per_rad"]) * ratio
+            ke = float(src.get("extension_stiffness_nm_per_rad", src["stiffness_nm_per_rad"])) * ratio
+        else:
+            kf = float(js["stiffness_nm_per_rad"])
+            ke = float(js.get("extension_stiffness_nm_per_rad", kf))
+        out[joint] = {"flexion": kf, "extension": ke}
+    return out
 
 
 def load_parameters(path: str | Path) -> dict[str, Any]:
@@ -123,6 +191,20 @@ def _check_parameters(params: Mapping[str, Any]) -> None:
                     raise ValueError(f"{finger} {mname}: {k} must be > 0")
             if mp.get("origin", "forearm") not in ("forearm", "MC"):
                 raise ValueError(f"{finger} {mname}: origin must be 'forearm' or 'MC'")
+    joints = (params.get("joint_structures") or {}).get("joints") or {}
+    for joint, js in joints.items():
+        if joint not in JOINTS:
+            raise ValueError(f"joint_structures: unknown joint {joint!r}")
+        if "derived_from" in js:
+            src = joints.get(js["derived_from"])
+            if src is None or "derived_from" in src:
+                raise ValueError(f"joint_structures {joint}: derived_from must name a joint with its own stiffness")
+        else:
+            for k in ("stiffness_nm_per_rad", "extension_stiffness_nm_per_rad"):
+                if k in js and not float(js[k]) >= 0:
+                    raise ValueError(f"joint_structures {joint}: {k} must be >= 0")
+            if "stiffness_nm_per_rad" not in js:
+                raise ValueError(f"joint_structures {joint}: stiffness_nm_per_rad or derived_from required")
 
 
 def reference_dimensions_m(
@@ -199,6 +281,8 @@ def _add_finger(
         coord.setDefaultClamped(False)
         model.addJoint(pin)
 
+    _add_joint_structures(osim, model, params, finger, ref)
+
     forearm = params["forearm_length_mm"] / 1000.0
     coords = {j: model.getCoordinateSet().get(joint_coordinate_name(finger, j)) for j in JOINTS}
     for mname, mp in fp["muscles"].items():
@@ -255,6 +339,32 @@ def _add_finger(
         # (activation 0.01) the lowest possible; 0 allows the tone-free passive curve.
         mus.set_minimum_activation(0.0)
         model.addForce(mus)
+
+
+def _add_joint_structures(osim, model, params: Mapping[str, Any], finger: str, ref: Mapping[str, Sequence[float]]) -> None:
+    """Passive joint structures (capsule, ligaments, volar plate, skin) as one force per joint.
+
+    An OpenSim ``CoordinateLimitForce`` with both limits at the neutral angle
+    (``rest_angle_deg``, 0 by default) is a spring on the joint coordinate:
+    moment -k_f (q - q0) in flexion, -k_e (q - q0) in extension (linear beyond a
+    ``transition_deg`` ramp), no damping (statics).  The published stiffness
+    applies to the mean finger; the reference model holds it divided by the
+    ``Original`` run's size factor, so that scaling by a run's factors
+    (``opensim_backend.scale_model``) gives that run's stiffness and the
+    ``Original`` run the published one.
+    """
+    spec = params.get("joint_structures") or {}
+    stiff = joint_structure_stiffness(params, finger)
+    q0 = float(spec.get("rest_angle_deg", 0.0))
+    transition = float(spec.get("transition_deg", 1.0))
+    for joint, k in stiff.items():
+        f = joint_size_factor(ref, joint)
+        deg = math.pi / 180.0  # CoordinateLimitForce takes stiffness per degree for rotational coordinates
+        clf = osim.CoordinateLimitForce(
+            joint_coordinate_name(finger, joint), q0, k["flexion"] / f * deg, q0, k["extension"] / f * deg, 0.0,
+            transition)
+        clf.setName(joint_structure_name(finger, joint))
+        model.addForce(clf)
 
 
 #: Via points sit this many moment arms proximal and distal of each joint axis.
