@@ -111,9 +111,8 @@ def _encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
             e["_FillValue"] = np.nan
             e["zlib"] = True
             e["complevel"] = 4
-        elif var.dtype == bool:
-            # netCDF4 has no boolean type: store as int8 and let xarray decode it back.
-            e["dtype"] = "i1"
+        # Booleans need no entry: xarray stores them as int8 with a dtype attribute
+        # and decodes them back to bool (an explicit dtype would defeat that).
         enc[name] = e
     for name, coord in ds.coords.items():
         if np.issubdtype(coord.dtype, np.floating):
