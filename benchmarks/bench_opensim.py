@@ -4,7 +4,8 @@
 
 Reports
 - one moment evaluation: set one joint angle, equilibrate the muscles of one
-  finger, read tendon forces and sum force x moment arm (median of repeats);
+  finger, read tendon forces, sum force x moment arm and add the passive
+  joint structures' moment (median of repeats);
 - one CCD run in-process (four fingers, 5-degree grid, two activations);
 - the 15-run sampling on ``--processes`` worker processes (a pool, as
   ``snakemake -c2`` runs independent jobs two at a time, but without
@@ -45,6 +46,7 @@ def one_evaluation(model_path: Path, table: pd.DataFrame, repeats: int) -> float
     coord = model.getCoordinateSet().get(om.joint_coordinate_name("F3", "MCP"))
     muscles = [m for m in (model.getMuscles().get(i) for i in range(model.getMuscles().getSize()))
                if m.getName().startswith("F3_")]
+    structures = ob._joint_structures(model, "F3")["MCP"]
     times = []
     for k in range(repeats):
         t0 = time.perf_counter()
@@ -54,6 +56,7 @@ def one_evaluation(model_path: Path, table: pd.DataFrame, repeats: int) -> float
         model.equilibrateMuscles(state)
         model.realizeDynamics(state)
         moment = sum(m.getTendonForce(state) * m.computeMomentArm(state, coord) for m in muscles)
+        moment += structures.calcLimitForce(state)
         times.append(time.perf_counter() - t0)
     assert math.isfinite(moment)
     return statistics.median(times)
