@@ -17,6 +17,7 @@ N m for the reported moments).
 """
 
 from ._assembly import SolidAssembler
+from ._config import solve_unit_from_config, unit_check, unit_mesh_from_config, write_deformed_vtu, write_unit_check
 from ._contact import ContactPair
 from ._material import mooney_rivlin_isochoric, neo_hooke_compressible
 from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh
@@ -45,5 +46,10 @@ __all__ = [
     "pressure_load",
     "solve_path",
     "solve_unit",
+    "solve_unit_from_config",
+    "unit_check",
+    "unit_mesh_from_config",
     "unit_model",
+    "write_deformed_vtu",
+    "write_unit_check",
 ]

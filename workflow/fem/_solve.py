@@ -34,7 +34,7 @@ DEFAULT_SOLVER = {
     "initial_step": 0.1,  # first load-factor increment
     "min_step": 1.0e-4,  # give up below this increment
     "max_step": 0.25,  # largest increment
-    "max_steps": 200,  # accepted + rejected steps
+    "max_steps": 400,  # accepted + rejected steps
     "max_iter": 15,  # Newton iterations per step
     "grow_below_iter": 6,  # grow the step when a step took fewer iterations
     "grow": 1.5,
@@ -257,12 +257,13 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
 
 
 def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, measure: Callable | None = None,
-               u0: np.ndarray | None = None) -> PathResult:
+               u0: np.ndarray | None = None, stops=()) -> PathResult:
     """Ramp the load factor from 0 to 1 with adaptive steps.
 
     ``measure(u, lam, info)`` is called after every accepted step; its dict is
-    stored in ``history`` together with lam, the Newton iterations and the
-    smallest contact gap.
+    stored in ``history`` together with lam, the Newton iterations, the
+    smallest contact gap and the elapsed wall time.  The steps land exactly on
+    every load factor in ``stops`` (0 < stop <= 1).
     """
     opts = dict(DEFAULT_SOLVER)
     opts.update(options or {})
@@ -277,20 +278,28 @@ def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, mea
             status, reason = 2, "too many steps"
             break
         dlam = min(dlam, 1.0 - lam)
-        target = lam + dlam
+        nxt = min([st for st in stops if st > lam + 1e-12], default=1.0)
+        step = min(dlam, nxt - lam)
+        target = lam + step if nxt - (lam + step) > 1e-9 else nxt
         guess = u
         if opts["predictor"] and dlam_prev > 0:
-            guess = u + (dlam / dlam_prev) * (u - u_prev)
+            guess = u + ((target - lam) / dlam_prev) * (u - u_prev)
         steps += 1
-        try:
-            ok, u_new, its, why, info = _newton(model, guess, target, p_ref, opts)
-        except Exception as exc:  # never let one point stop a sweep
-            ok, u_new, its, why, info = False, u, 0, f"error: {exc!r}", {}
-        iters += its
+        # a step that fails is retried once with the line search switched (it
+        # helps in some contact states and hurts in others) before cutting back
+        for ls in (opts["line_search"], not opts["line_search"]):
+            try:
+                ok, u_new, its, why, info = _newton(model, guess, target, p_ref, dict(opts, line_search=ls))
+            except Exception as exc:  # never let one point stop a sweep
+                ok, u_new, its, why, info = False, u, 0, f"error: {exc!r}", {}
+            iters += its
+            if ok or why.startswith("inverted"):
+                break
         if ok:
             u_prev, u = u, u_new
-            lam, dlam_prev = target, dlam
-            rec = {"lam": lam, "iterations": its, "gmin": info.get("gmin", np.inf)}
+            lam, dlam_prev = target, target - lam
+            rec = {"lam": lam, "iterations": its, "gmin": info.get("gmin", np.inf),
+                   "wall_time_s": time.perf_counter() - t_start}
             if measure is not None:
                 rec.update(measure(u, lam, info))
             history.append(rec)
@@ -299,7 +308,7 @@ def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, mea
         else:
             cuts += 1
             reason = why
-            dlam *= opts["cut"]
+            dlam = (target - lam) * opts["cut"]
             if dlam < opts["min_step"]:
                 status = 1
                 break

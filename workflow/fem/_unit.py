@@ -46,7 +46,7 @@ DEFAULT_MATERIAL = {
 }
 
 #: Penalty contact: eps = penalty_factor * mu0 / h (MPa/mm); search distance, mm.
-DEFAULT_CONTACT = {"penalty_factor": 100.0, "search_mm": 1.0}
+DEFAULT_CONTACT = {"penalty_factor": 100.0, "search_mm": 1.0, "two_pass": True, "extend": 0.5, "smoothing_mm": 0.01}
 
 
 def material_constants(material: Mapping | None = None) -> dict:
@@ -127,7 +127,7 @@ def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = 
     }
     copts = dict(DEFAULT_CONTACT)
     copts.update(dict(contact_options or {}))
-    pairs = contact_pairs_from_mesh(um, copts["search_mm"]) if contact else []
+    pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["two_pass"], copts["extend"], copts["smoothing_mm"]) if contact else []
     eps = copts["penalty_factor"] * mat["mu0"] / um.h
     return Model(solid, pressures=pressures, contacts=pairs, penalty=eps, fixed=fixed, ties=ties)
 
@@ -166,7 +166,8 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
 
 def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", contact: bool = True, *,
                material: Mapping | None = None, contact_options: Mapping | None = None,
-               solver: Mapping | None = None, mixed: bool = True, keep_displacement: bool = False) -> UnitResult:
+               solver: Mapping | None = None, mixed: bool = True, keep_displacement: bool = False,
+               stops=()) -> UnitResult:
     """Solve the unit model from zero to (p_top_kpa, p_bottom_kpa) and measure it.
 
     Parameters
@@ -184,6 +185,11 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
         Overrides of ``DEFAULT_MATERIAL``, ``DEFAULT_CONTACT``, ``DEFAULT_SOLVER``.
     mixed : bool
         False = plain Q1 displacement elements (lock; for tests only).
+    keep_displacement : bool
+        Keep the final nodal displacement (mm, node-interleaved) in the result.
+    stops : sequence of float
+        Fractions s in (0, 1] of the ray that the load steps must hit exactly
+        (e.g. 60/300 and 180/300), so that ``history`` has samples there.
 
     Returns
     -------
@@ -200,7 +206,7 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
     measure = _measure_factory(um, model, case, p_top_kpa, p_bottom_kpa)
     opts = dict(DEFAULT_SOLVER)
     opts.update(dict(solver or {}))
-    res = solve_path(model, um.mesh.p, opts, measure)
+    res = solve_path(model, um.mesh.p, opts, measure, stops=tuple(stops))
     last = res.history[-1] if res.history else {
         "bending_angle_total_deg": 0.0, "bending_angle_deg": 0.0, "bending_moment_nm": 0.0 if case == "blocked" else np.nan,
         "max_penetration_mm": 0.0}

@@ -1,0 +1,141 @@
+"""From the config's ``actuator`` section to ``solve_unit`` calls and the unit-check dataset."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import xarray as xr
+
+from ._mesh import build_unit_mesh
+from ._solve import STATUS_FLAGS
+from ._unit import UnitResult, solve_unit
+
+__all__ = ["unit_mesh_from_config", "solve_unit_from_config", "unit_check", "write_unit_check", "write_deformed_vtu"]
+
+log = logging.getLogger(__name__)
+
+
+def unit_mesh_from_config(actuator: Mapping, dim: int):
+    """The unit mesh of the config (``actuator.geometry``, ``actuator.mesh.h_{2d,3d}_mm``)."""
+    mesh = dict(actuator.get("mesh", {}))
+    h = mesh.get("h_2d_mm", 0.5) if dim == 2 else mesh.get("h_3d_mm", 1.0)
+    return build_unit_mesh(actuator.get("geometry"), h=h, dim=dim, paper_layers=mesh.get("paper_layers", 1))
+
+
+def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bottom_kpa: float, case: str = "free",
+                           mesh=None, **kwargs) -> UnitResult:
+    """``solve_unit`` with geometry, mesh size, material, contact and solver from ``actuator``.
+
+    ``mesh`` (a ``UnitMesh``) can be passed to reuse one across calls.
+    """
+    contact = dict(actuator.get("contact", {}))
+    enabled = contact.pop("enabled", True)
+    return solve_unit(
+        mesh if mesh is not None else unit_mesh_from_config(actuator, dim),
+        p_top_kpa, p_bottom_kpa, case, enabled,
+        material=actuator.get("material"), contact_options=contact, solver=actuator.get("solver"), **kwargs,
+    )
+
+
+def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 300.0)):
+    """Free angle and blocked moment of the unit at P_T = p_top_kpa, P_B = 0 (Fig. 12 points).
+
+    One ray per (model, case) from 0 to max(p_top_kpa) whose load steps hit
+    every point exactly; ``wall_time_s`` is the time from zero load to the point.
+    Returns ``(dataset, deformed 3D mesh and displacement at the largest
+    pressure or None)``.
+    """
+    p_top_kpa = np.asarray(sorted(p_top_kpa), dtype=float)
+    cases = ("free", "blocked")
+    shape = (len(models), len(p_top_kpa), len(cases))
+    angle = np.full(shape, np.nan)
+    angle_total = np.full(shape, np.nan)
+    moment = np.full(shape, np.nan)
+    pen = np.full(shape, np.nan)
+    wall = np.full(shape, np.nan)
+    status = np.full(shape, 3, dtype=np.int32)
+    iters = np.zeros(shape, dtype=np.int32)
+    deformed = None
+    pmax = float(p_top_kpa[-1])
+    for i, model in enumerate(models):
+        dim = int(model[0])
+        mesh = unit_mesh_from_config(actuator, dim)
+        for k, case in enumerate(cases):
+            res = solve_unit_from_config(actuator, dim, pmax, 0.0, case, mesh=mesh, stops=tuple(p_top_kpa / pmax),
+                                         keep_displacement=(dim == 3 and case == "free"))
+            log.info("%s %s to P_T=%g kPa: status %d (%s), %d iterations, %.1f s", model, case, pmax, res.status,
+                     res.reason, res.newton_iterations, res.wall_time_s)
+            for j, p in enumerate(p_top_kpa):
+                hit = [h for h in res.history if abs(h["p_top_kpa"] - p) < 1e-6 * pmax]
+                if not hit:  # the ray failed before this pressure
+                    status[i, j, k] = res.status
+                    continue
+                h = hit[0]
+                status[i, j, k] = 0
+                iters[i, j, k] = sum(x["iterations"] for x in res.history if x["lam"] <= h["lam"])
+                wall[i, j, k] = h["wall_time_s"]
+                pen[i, j, k] = max(x["max_penetration_mm"] for x in res.history if x["lam"] <= h["lam"])
+                angle[i, j, k] = h["bending_angle_deg"]
+                angle_total[i, j, k] = h["bending_angle_total_deg"]
+                moment[i, j, k] = h["bending_moment_nm"]
+                log.info("  P_T=%g kPa: angle %.3f deg/unit, moment %.4f N m", p, h["bending_angle_deg"], h["bending_moment_nm"])
+            if res.displacement is not None and res.status == 0:
+                deformed = (mesh, res.displacement)
+    dims3 = ("model", "p_top_kpa", "case")
+    ds = xr.Dataset(
+        {
+            "bending_angle_deg": (("model", "p_top_kpa"), angle[:, :, 0],
+                                  {"units": "degree", "long_name": "free bending angle per unit (chamber), P_B = 0"}),
+            "bending_angle_total_deg": (("model", "p_top_kpa"), angle_total[:, :, 0],
+                                        {"units": "degree", "long_name": "free bending angle of the three-chamber unit model"}),
+            "bending_moment_nm": (("model", "p_top_kpa"), moment[:, :, 1],
+                                  {"units": "N m", "long_name": "blocked moment per unit, full actuator width"}),
+            "max_penetration_mm": (dims3, pen, {"units": "mm", "long_name": "largest contact penetration over the load path"}),
+            "wall_time_s": (dims3, wall, {"units": "s", "long_name": "wall time of the solve from zero load"}),
+            "newton_iterations": (dims3, iters, {"units": "1", "long_name": "Newton iterations over the load path"}),
+            "status": (dims3, status, {"units": "1", "long_name": "solver status",
+                                       "flag_values": np.array(list(STATUS_FLAGS), dtype=np.int32),
+                                       "flag_meanings": " ".join(STATUS_FLAGS.values())}),
+        },
+        coords={
+            "model": ("model", list(models)),
+            "p_top_kpa": ("p_top_kpa", p_top_kpa, {"units": "kPa", "long_name": "top chamber pressure"}),
+            "case": ("case", list(cases)),
+            "p_bottom_kpa": ((), 0.0, {"units": "kPa", "long_name": "bottom chamber pressure"}),
+        },
+    )
+    return ds, deformed
+
+
+def write_deformed_vtu(deformed, path: str | Path) -> Path:
+    """Write a deformed unit (mesh, displacement) as .vtu with the displacement as point data."""
+    mesh, u = deformed
+    dim = mesh.dim
+    disp = u.reshape(-1, dim)
+    if dim == 2:
+        disp = np.column_stack([disp, np.zeros(len(disp))])
+    return mesh.write(path, point_data={"displacement": disp})
+
+
+def write_unit_check(nc_path: str | Path, vtu_path: str | Path, actuator: Mapping, *, rule: str = "unit_check",
+                     config_slice=None) -> None:
+    """Run ``unit_check`` with the config's points and write the dataset and the deformed 3D unit.
+
+    If the 3D model is not requested or its ray fails, the .vtu holds the
+    undeformed 3D mesh with zero displacement (and the dataset's status says why).
+    """
+    from ..provenance import write_dataset
+
+    uc = dict(actuator.get("unit_check", {}))
+    models = tuple(uc.get("models", ("2d", "3d")))
+    ds, deformed = unit_check(actuator, models, uc.get("p_top_kpa", (60.0, 180.0, 300.0)))
+    write_dataset(ds, nc_path, rule=rule, config_slice=config_slice if config_slice is not None else dict(actuator),
+                  title="PNA unit check: free bending angle and blocked moment at P_T = 60, 180, 300 kPa (P_B = 0)",
+                  source="workflow.fem (scikit-fem, mean-dilatation Q1/P0, follower pressure, penalty contact)")
+    if deformed is None:
+        mesh = unit_mesh_from_config(actuator, 3)
+        deformed = (mesh, np.zeros(mesh.mesh.p.size))
+    write_deformed_vtu(deformed, vtu_path)
