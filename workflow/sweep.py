@@ -383,18 +383,27 @@ def samples_from_paths(direction: Sequence[float], scales: np.ndarray, free: Any
 def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Sequence[float], np.ndarray], Any]:
     """The ray solver of FE model ``fea`` ('2d' or '3d') for the sweep.
 
-    To be wired to ``workflow.fem`` (issue 4): return a callable
-    ``solve_ray(direction, scales)`` that runs the free case and the blocked
-    case along the ray (P_T, P_B) = s * direction for the given scales and
-    returns the fields of `SAMPLE_FIELDS` (angle per unit in degrees, blocked
-    moment per unit in N m, full actuator width, status in `STATUS_FLAGS`),
-    e.g. ``samples_from_paths(direction, scales, fem.solve_unit(..., case="free"),
-    fem.solve_unit(..., case="blocked"))``.
+    Returns ``solve_ray(direction, scales)``: the free and the blocked case of
+    :func:`workflow.fem.solve_unit` along (P_T, P_B) = s * direction, with load
+    steps landing exactly on ``scales`` (so the samples are solutions, not
+    interpolations), turned into the fields of `SAMPLE_FIELDS` by
+    :func:`samples_from_paths`.  The mesh is built once per job.
     """
-    raise NotImplementedError(
-        f"make_solver({fea!r}): the FE solver of issue 4 (workflow.fem.solve_unit) is not wired into the "
-        "sweep yet; replace the body of workflow.sweep.make_solver with a call to it"
-    )
+    from . import fem  # heavy import only where a sweep runs
+
+    if fea not in ("2d", "3d"):
+        raise ValueError(f"unknown FE model {fea!r}: expected '2d' or '3d'")
+    dim = 2 if fea == "2d" else 3
+    mesh = fem.unit_mesh_from_config(actuator_config, dim)
+
+    def solve_ray(direction: Sequence[float], scales: np.ndarray) -> dict[str, np.ndarray]:
+        p_top, p_bottom = (float(v) for v in direction)
+        stops = tuple(float(v) for v in np.asarray(scales, float))
+        free = fem.solve_unit_from_config(actuator_config, dim, p_top, p_bottom, "free", mesh=mesh, stops=stops)
+        blocked = fem.solve_unit_from_config(actuator_config, dim, p_top, p_bottom, "blocked", mesh=mesh, stops=stops)
+        return samples_from_paths(direction, scales, free, blocked)
+
+    return solve_ray
 
 
 def write_shard(out: str | Path, *, fea: str, shard: int, sweep_cfg: Mapping[str, Any],
