@@ -192,9 +192,19 @@ def test_shard_roundtrip_netcdf(tmp_path):
     assert back.attrs["rule"] == "sweep_shard"
 
 
-def test_make_solver_names_issue_4():
-    with pytest.raises(NotImplementedError, match="issue 4"):
-        sweep.make_solver("3d", {})
+def test_make_solver_rejects_unknown_model():
+    with pytest.raises(ValueError, match="4d"):
+        sweep.make_solver("4d", {})
+
+
+def test_real_solver_samples_a_ray_at_its_scales():
+    """The wired FE solver (coarse 2D mesh) lands on the ray's scales with the right signs."""
+    solve_ray = sweep.make_solver("2d", {"mesh": {"h_2d_mm": 2.0}})
+    out = solve_ray((60.0, 0.0), np.array([0.5, 1.0]))
+    np.testing.assert_allclose(out["p_top_kpa"], [30.0, 60.0])
+    assert list(out["status"]) == [0, 0]
+    assert 0 < out["bending_angle_deg"][0] < out["bending_angle_deg"][1]
+    assert 0 < out["bending_moment_nm"][0] < out["bending_moment_nm"][1]
 
 
 @pytest.mark.slow
