@@ -1,7 +1,6 @@
 """Helpers for running the workflow on a copy of its files (smoke runs).
 
-The same operations as the helpers in tests/test_workflow.py, importable by other
-tests (tests/test_slurm.py): copy the workflow into a temporary directory, link
+Shared by tests/test_workflow.py and tests/test_slurm.py: copy the workflow into a temporary directory, link
 the `workflow` package, write the local config override, run snakemake, read a
 dry run's job counts.
 """

@@ -6,69 +6,14 @@ so it never touches the repository's results/.
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
-
 import pytest
 import xarray as xr
 import yaml
 
-from workflow import settings
-
-REPO = settings.REPO_ROOT
-SNAKEMAKE = [sys.executable, "-m", "snakemake"]
-
-
-def _copy_workflow(dst: Path) -> None:
-    for name in ("Snakefile", "rules", "config", "resources", "report"):
-        src = REPO / name
-        if src.is_dir():
-            shutil.copytree(src, dst / name)
-        else:
-            shutil.copy2(src, dst / name)
-    # the rules' script: adapters live in the package; link it rather than copy
-    (dst / "workflow").symlink_to(REPO / "workflow", target_is_directory=True)
-
-
-def _run(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    proc = subprocess.run([*SNAKEMAKE, *args], cwd=workdir, capture_output=True, text=True, env=env, timeout=1500)
-    if check and proc.returncode != 0:
-        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-6000:]}")
-    return proc
-
-
-def _local_overrides(workdir: Path) -> Path:
-    """Point the table backend at the shared export by absolute path (the copy lives elsewhere)."""
-    cfg = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    over: dict = {}
-    if cfg.get("musculoskeletal", {}).get("backend", "table") == "table":
-        table = (REPO / cfg["musculoskeletal"]["table_path"]).resolve()
-        if not table.is_file():
-            pytest.skip(f"default backend reads the authors' export, absent here: {table}")
-        over["musculoskeletal"] = {"table_path": str(table)}
-    path = workdir / "config" / "local.yaml"
-    path.write_text(yaml.safe_dump(over))
-    return path
-
-
-def _planned_jobs(proc: subprocess.CompletedProcess) -> dict[str, int]:
-    """Job counts from a dry run's 'Job stats' table."""
-    out = proc.stdout + proc.stderr
-    if "Nothing to be done" in out:
-        return {}
-    jobs: dict[str, int] = {}
-    lines = out.splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith("Job stats"))
-    for line in lines[start + 3:]:
-        parts = line.split()
-        if len(parts) != 2 or parts[0] == "total":
-            break
-        jobs[parts[0]] = int(parts[1])
-    return jobs
+from _smoke import copy_workflow as _copy_workflow
+from _smoke import local_overrides as _local_overrides
+from _smoke import planned_jobs as _planned_jobs
+from _smoke import run_snakemake as _run
 
 
 @pytest.fixture(scope="module")
