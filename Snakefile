@@ -18,6 +18,7 @@ include: "rules/doe.smk"
 include: "rules/musculoskeletal.smk"
 include: "rules/opensim.smk"
 include: "rules/tracking.smk"
+include: "rules/actuator.smk"
 
 
 rule all:

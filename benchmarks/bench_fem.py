@@ -62,9 +62,11 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--p", type=float, default=300.0)
     ap.add_argument("--no-3d", action="store_true")
+    ap.add_argument("--h2", type=float, nargs="*", default=None, help="2D element sizes (mm)")
+    ap.add_argument("--h3", type=float, nargs="*", default=None, help="3D element sizes (mm)")
     a = ap.parse_args()
-    h2 = [1.0] if a.quick else [1.0, 0.5, 0.25]
-    h3 = [2.0] if a.quick else [2.0, 1.0]
+    h2 = a.h2 if a.h2 is not None else ([1.0] if a.quick else [1.0, 0.5, 0.25])
+    h3 = a.h3 if a.h3 is not None else ([2.0] if a.quick else [2.0, 1.0])
     cases = [(2, h, c, k, a.p) for h in h2 for c in (False, True) for k in ("free", "blocked")]
     if not a.no_3d:
         cases += [(3, h, c, k, a.p) for h in h3 for c in (False, True) for k in ("free", "blocked")]
@@ -84,7 +86,8 @@ def main():
     import pandas as pd
 
     df = pd.DataFrame(rows)
-    df.to_csv(OUT / "bench_fem.csv", index=False)
+    tag = "_".join(["2d"] + [f"{h:g}" for h in h2] + (["3d"] + [f"{h:g}" for h in h3] if not a.no_3d else []))
+    df.to_csv(OUT / f"bench_fem_{tag}.csv", index=False)
     cols = ["code", "dim", "h_mm", "contact", "case", "ndofs", "status", "load_factor", "wall_time_s", "assembly_time_s",
             "solve_time_s", "newton_iterations", "steps", "cutbacks", "bending_angle_deg", "bending_moment_nm",
             "max_penetration_mm", "peak_rss_mb"]

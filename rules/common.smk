@@ -46,6 +46,8 @@ def get_final_output():
     out += ["results/validation/musculoskeletal.nc", "results/validation/musculoskeletal.png"]
     if config["tracking"]["enabled"]:
         out += expand("results/tracking/{patient}.json", patient=PATIENTS)
+    # Nonlinear FEA of the PNA unit (issue 4).
+    out += ["results/actuator/unit_check.nc", "results/actuator/unit_3d_300kpa.vtu"]
     return out
 
 
