@@ -126,8 +126,12 @@ class ContactPair:
         nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
         g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
         inside = np.all(np.abs(ab) <= self.lim[cand][..., None] + 1e-6, axis=-1)
-        score = np.where(inside, np.abs(g), np.inf)
-        j = np.argmin(score, axis=1)
+        # closest facet = smallest distance to the projection clipped onto the facet itself
+        # (as in 2D), so that an edge facet's extension never wins over the facet a slave is on
+        abc = np.clip(ab, -1.0, 1.0)
+        Nc = 0.25 * (1 + _XI[:, 0] * abc[..., 0, None]) * (1 + _XI[:, 1] * abc[..., 1, None])
+        dist = np.linalg.norm(xs[:, None, :] - np.einsum("ska,skai->ski", Nc, X), axis=-1)
+        j = np.argmin(dist, axis=1)
         s = np.arange(xs.shape[0])
         return cand[s, j], N[s, j], nrm[s, j], g[s, j], inside[s, j]
 
