@@ -21,7 +21,7 @@ log = logging.getLogger(__name__)
 def unit_mesh_from_config(actuator: Mapping, dim: int):
     """The unit mesh of the config (``actuator.geometry``, ``actuator.mesh.h_{2d,3d}_mm``)."""
     mesh = dict(actuator.get("mesh", {}))
-    h = mesh.get("h_2d_mm", 0.5) if dim == 2 else mesh.get("h_3d_mm", 1.0)
+    h = mesh.get("h_2d_mm", 1.0) if dim == 2 else mesh.get("h_3d_mm", 2.0)
     return build_unit_mesh(actuator.get("geometry"), h=h, dim=dim, paper_layers=mesh.get("paper_layers", 1))
 
 
