@@ -7,6 +7,16 @@ Compact public API (like a FElupe job)::
     res = fem.solve_unit(mesh, p_top_kpa=300, p_bottom_kpa=0, case="free", contact=True)
     res.bending_angle_deg, res.status, res.history   # one dict per load step
 
+Sweeps along a ray p = s (p_top, p_bottom), s in (0, 1] (issue 5): one call per
+ray and case; every accepted load step is a sample in ``res.history`` (keys
+``p_top_kpa``, ``p_bottom_kpa``, ``bending_angle_deg``, ``bending_moment_nm``,
+``max_penetration_mm``, ``iterations``, ``wall_time_s``); ``stops`` makes the
+steps land on given s.  With the config section::
+
+    res = fem.solve_unit_from_config(config["actuator"], 2, p_top, p_bottom, "free", stops=(0.25, 0.5))
+
+A stalled ray returns ``status`` > 0 with the last converged ``load_factor``.
+
 Physics: three-term Mooney-Rivlin silicone on isochoric invariants with a
 mean-dilatation (Q1/P0, condensed) volumetric part K = bulk_ratio * mu0;
 compressible neo-Hooke paper layer (E = 1.2 GPa, nu = 0.2); follower
