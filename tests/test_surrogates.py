@@ -14,24 +14,7 @@ from workflow import surrogates, sweep
 from workflow.provenance import write_dataset
 
 
-def double_angle(pt, pb):
-    return 12.0 * np.tanh((pt - pb) / 250.0) * (1.0 - 0.2 * (pt + pb) / 600.0)
-
-
-def double_moment(pt, pb):
-    return 2.0e-3 * (pt - pb) * (1.0 + 0.1 * (pt + pb) / 600.0)
-
-
-def double_solver(direction, scales):
-    pt, pb = scales * direction[0], scales * direction[1]
-    n = scales.size
-    return (pt, pb, double_angle(pt, pb), double_moment(pt, pb), np.zeros(n, int), np.full(n, 3), np.full(n, 0.01))
-
-
-def response(n_ratios=6, n_pressures=8, p_max=300.0):
-    shards = [sweep.run_shard(double_solver, shard=i, n_shards=2, p_max_kpa=p_max, n_ratios=n_ratios,
-                              n_pressures=n_pressures) for i in range(2)]
-    return sweep.merge_shards(shards, n_ratios=n_ratios, n_pressures=n_pressures)
+from _doubles import double_angle, double_moment, double_response as response, double_solver  # noqa: E402,F401
 
 
 @pytest.fixture(scope="module")

@@ -13,14 +13,7 @@ from workflow import unit_model
 from workflow.unit_model import UnitModel
 
 
-def free(pt, pb):
-    pt, pb = np.asarray(pt, float), np.asarray(pb, float)
-    return 12.0 * np.tanh((pt - pb) / 250.0) * (1.0 - 0.2 * (pt + pb) / 600.0)
-
-
-def blocked(pt, pb):
-    pt, pb = np.asarray(pt, float), np.asarray(pb, float)
-    return 2.0e-3 * (pt - pb) * (1.0 + 0.1 * (pt + pb) / 600.0)
+from _doubles import double_angle as free, double_moment as blocked, double_response  # noqa: E402
 
 
 def k_diagonal(p):
@@ -120,15 +113,9 @@ def test_min_norm_against_brute_force(model):
 
 
 def test_on_a_fitted_surrogate():
-    from workflow import surrogates, sweep
+    from workflow import surrogates
 
-    def solver(direction, scales):
-        pt, pb = scales * direction[0], scales * direction[1]
-        n = scales.size
-        return pt, pb, free(pt, pb), blocked(pt, pb), np.zeros(n, int), np.ones(n, int), np.zeros(n)
-
-    resp = sweep.merge_shards([sweep.run_shard(solver, shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=6,
-                                               n_pressures=8)], n_ratios=6, n_pressures=8)
+    resp = double_response(6, 8, n_shards=1)
     s = surrogates.fit_surrogate(resp, "rbf", fea="3d")
     um = UnitModel.from_surrogate(s)
     assert um.p_max_kpa == 300.0
@@ -139,15 +126,9 @@ def test_on_a_fitted_surrogate():
 
 def test_finite_everywhere_on_a_knn_surrogate():
     """The cascade needs a finite angle at every pressure pair, also on KNN's flat stretches."""
-    from workflow import surrogates, sweep
+    from workflow import surrogates
 
-    def solver(direction, scales):
-        pt, pb = scales * direction[0], scales * direction[1]
-        n = scales.size
-        return pt, pb, free(pt, pb), blocked(pt, pb), np.zeros(n, int), np.ones(n, int), np.zeros(n)
-
-    resp = sweep.merge_shards([sweep.run_shard(solver, shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=6,
-                                               n_pressures=5)], n_ratios=6, n_pressures=5)
+    resp = double_response(6, 5, n_shards=1)
     um = UnitModel.from_surrogate(surrogates.fit_surrogate(resp, "knn", fea="3d", k=4))
     g = np.linspace(0, 300, 31)
     th = um.angle_deg(g[:, None], g[None, :], 0.004)
