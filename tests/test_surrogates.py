@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from workflow import surrogates, sweep
+from workflow import surrogates
 from workflow.provenance import write_dataset
 
 
-from _doubles import double_angle, double_moment, double_response as response, double_solver  # noqa: E402,F401
+from _doubles import double_response as response
 
 
 @pytest.fixture(scope="module")
