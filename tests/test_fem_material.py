@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from workflow import fem
-from workflow.fem._material import det_inv
 
 C10, C01, C20 = 0.2605676, 0.2975498, 0.15750069  # MPa, Table 5
 MAT = fem.material_constants({})
@@ -60,7 +59,6 @@ def _cube_nominal_stress(stretch, mode):
         for n in np.flatnonzero(p[k] == 1.0):
             pres[3 * n + k] = stretch - 1.0
     model = fem.Model(solid, fixed=fixed, prescribed=pres)
-    out = {}
 
     def measure(u, lam, info):
         r = info["r"]

@@ -187,7 +187,7 @@ def sample_model(
     joint's range are NaN with ``status`` = 2.  Moments N m, forces N, moment
     arms mm.
     """
-    osim = om._opensim()
+    om._opensim()  # fail early, with a clear message, where opensim is missing
     angles = np.asarray(angle_grid() if angles_deg is None else angles_deg, dtype=float)
     acts = np.asarray(activations, dtype=float)
     muscle_names = sorted({m.getName().split("_", 1)[1] for f in fingers for m in _finger_muscles(model, f)})
