@@ -13,7 +13,6 @@ import xarray as xr
 from workflow import surrogates
 from workflow.provenance import write_dataset
 
-
 from _doubles import double_response as response
 
 
