@@ -73,9 +73,17 @@ class Model:
     fixed : array of dofs held at zero
     prescribed : dict dof -> value (mm) at lam = 1
     ties : list of arrays of dofs that share one unknown
+    offsets : dict dof -> value (mm) at lam = 1 for tied dofs: u = shared + lam * offset
+        (e.g. an end face held plane at a prescribed inclination).  Each tie
+        group needs one member without an offset: it carries the shared value.
+    extras : list of objects with ``evaluate(x, u, lam, tangent) -> (f (n,), K (n, n) sparse or None)``
+        Further internal-force terms added to the residual (springs, hinges,
+        straps, dead loads as negative forces); ``x`` are the current node
+        positions (dim, nnodes).
     """
 
-    def __init__(self, solid: SolidAssembler, pressures=None, contacts=(), penalty=0.0, fixed=(), prescribed=None, ties=()):
+    def __init__(self, solid: SolidAssembler, pressures=None, contacts=(), penalty=0.0, fixed=(), prescribed=None, ties=(),
+                 offsets=None, extras=()):
         self.solid = solid
         self.p0 = solid.mesh_p if hasattr(solid, "mesh_p") else None
         self.pressures = dict(pressures or {})
@@ -87,6 +95,10 @@ class Model:
         self.uD = np.zeros(n)
         for dof, val in prescribed.items():
             self.uD[dof] = val
+        offsets = dict(offsets or {})
+        for dof, val in offsets.items():
+            self.uD[dof] = val
+        self.extras = list(extras)
         blocked = np.zeros(n, bool)
         blocked[np.asarray(list(fixed), dtype=int)] = True
         blocked[np.asarray(list(prescribed), dtype=int)] = True
@@ -98,14 +110,20 @@ class Model:
         free = np.flatnonzero(~blocked & ~tied)
         col[free] = np.arange(free.size)
         m = free.size
+        rep = list(free)  # per unknown, a dof that carries it without offset
         for grp in ties:
             grp = np.asarray(grp)
             grp = grp[~blocked[grp]]
+            carriers = grp[self.uD[grp] == 0.0]
+            if grp.size and not carriers.size:
+                raise ValueError("every tie group needs one dof without an offset")
             col[grp] = m
+            rep.append(carriers[0])
             m += 1
         rows = np.flatnonzero(col >= 0)
         self.T = sp.csr_matrix((np.ones(rows.size), (rows, col[rows])), shape=(n, m))
         self.m = m
+        self.rep = np.asarray(rep, dtype=np.int64)
         # fixed sparsity: body + pressure facets
         r_list, c_list = [solid.rows], [solid.cols]
         for facets, _ in self.pressures.values():
@@ -139,6 +157,11 @@ class Model:
                 vals.append(Ke.ravel())
         r = f_int - f_ext
         K = self.pattern.matrix(np.concatenate(vals)) if tangent else None
+        for extra in self.extras:
+            fx, Kx = extra.evaluate(x, u, lam, tangent)
+            r = r + fx
+            if tangent and Kx is not None:
+                K = K + sp.csr_matrix(Kx)
         if self.contacts and self.penalty > 0:
             cr, cc, cv = [], [], []
             for pair in self.contacts:
@@ -220,8 +243,9 @@ def _line_search(model: Model, u: np.ndarray, du: np.ndarray, rr: np.ndarray, la
 def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: dict):
     """Newton iterations at fixed lam; returns (ok, u, iterations, reason, info)."""
     T = model.T
-    u = u0.copy()
-    u[model.constrained] = lam * model.uD[model.constrained]
+    # u = T v + lam uD: the unknowns v are read from their carrier dofs, so
+    # prescribed values and tie offsets follow the new load factor
+    u = model.T @ u0[model.rep] + lam * model.uD
     r0 = None
     info = {}
     for it in range(1, opts["max_iter"] + 1):
