@@ -60,9 +60,12 @@ class SolidAssembler:
     ----------
     mesh : skfem.MeshQuad or skfem.MeshHex
     material : ndarray of int (ncells,)
-        0 = silicone (mixed, Mooney-Rivlin), 1 = paper (neo-Hooke).
+        0 = silicone (mixed, Mooney-Rivlin), 1 = paper (neo-Hooke); further
+        ids are compressible neo-Hooke solids with the constants of
+        ``mat["neo_hooke"]`` (e.g. the finger's flesh and bone).
     mat : dict
-        ``c10, c01, c20`` (MPa), ``bulk`` (K, MPa), ``paper_mu``, ``paper_lambda`` (MPa).
+        ``c10, c01, c20`` (MPa), ``bulk`` (K, MPa), ``paper_mu``, ``paper_lambda`` (MPa);
+        optional ``neo_hooke``: {material id: (mu, lambda) in MPa} for ids >= 1.
     mixed : bool
         False gives plain Q1 displacement elements (full integration of the
         volumetric energy), which lock; kept for the locking test.
@@ -87,10 +90,13 @@ class SolidAssembler:
         self.mat = dict(mat)
         self.mixed = mixed
         self.volume = self.dx.sum(axis=1)
+        # id -> (mu, lambda) of every compressible neo-Hooke material (paper = 1)
+        self.neo_hooke = {1: (mat.get("paper_mu", 0.0), mat.get("paper_lambda", 0.0))}
+        self.neo_hooke.update({int(k): tuple(v) for k, v in dict(mat.get("neo_hooke", {})).items()})
         nq = self.dx.shape[1]
         step = max(1, chunk_points // nq)
         self.chunks = []
-        for gid in (0, 1):
+        for gid in [0] + sorted(self.neo_hooke):
             cells = np.flatnonzero(material == gid)
             for i in range(0, cells.size, step):
                 self.chunks.append((gid, cells[i:i + step]))
@@ -107,8 +113,8 @@ class SolidAssembler:
     def _stress(self, gid, F, J, dx, V, tangent):
         """P (d,d,e,q) and A (d,d,d,d,e,q) incl. the condensed pressure; cof and p for the rank-one term."""
         m = self.mat
-        if gid == 1:
-            _, P, A = neo_hooke_compressible(F, m["paper_mu"], m["paper_lambda"], tangent)
+        if gid != 0:
+            _, P, A = neo_hooke_compressible(F, *self.neo_hooke[gid], tangent)
             return P, A, None, None
         _, P, A = mooney_rivlin_isochoric(F, m["c10"], m["c01"], m["c20"], tangent)
         _, Finv = det_inv(F)
@@ -160,8 +166,8 @@ class SolidAssembler:
             F = self.deformation_gradient(u, cells)
             J, _ = det_inv(F)
             dx = self.dx[cells]
-            if gid == 1:
-                psi, _, _ = neo_hooke_compressible(F, m["paper_mu"], m["paper_lambda"], False)
+            if gid != 0:
+                psi, _, _ = neo_hooke_compressible(F, *self.neo_hooke[gid], False)
                 E += float(np.sum(psi * dx))
                 continue
             psi, _, _ = mooney_rivlin_isochoric(F, m["c10"], m["c01"], m["c20"], False)
