@@ -19,18 +19,23 @@ grids through every geometric breakpoint, each interval cut into
 ``ceil(length / h)`` elements (so halving ``h`` nests the meshes), with the
 pocket and gap cells removed.  The paper layer is ``paper_layers`` elements
 thick.
+
+The whole actuator (issue 9) is the same chain with ``sum(units_per_group)``
+chambers: ``build_actuator_mesh`` adds per-group cavity facet sets
+(``cavity_top_{group}`` / ``cavity_bottom_{group}``), the outer faces of the
+two sides and the backbone nodes, so that each group gets its own pressures.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 import skfem
 
-__all__ = ["DEFAULT_GEOMETRY", "UnitMesh", "build_unit_mesh", "build_grid_mesh"]
+__all__ = ["DEFAULT_GEOMETRY", "UnitMesh", "build_unit_mesh", "build_actuator_mesh", "build_grid_mesh"]
 
 #: Table 6 values used by the unit model, mm.
 DEFAULT_GEOMETRY: dict[str, float] = {
@@ -87,6 +92,8 @@ class UnitMesh:
     geometry: dict
     h: float
     contact_pairs: list[tuple[str, str]] = field(default_factory=list)
+    #: chamber -> group name (whole actuator only; empty for the unit)
+    chamber_group: tuple[str, ...] = ()
 
     @property
     def dim(self) -> int:
@@ -190,6 +197,37 @@ def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, p
     """
     g = dict(DEFAULT_GEOMETRY)
     g.update(dict(geom or {}))
+    return _chain_mesh(g, h, dim, paper_layers, None)
+
+
+def build_actuator_mesh(geom: Mapping | None, units_per_group: Mapping[str, int] | Sequence[tuple[str, int]],
+                        h: float = 1.0, dim: int = 2, paper_layers: int = 1) -> UnitMesh:
+    """Structured mesh of the whole actuator: chambers in groups, left to right.
+
+    Same geometry, element layout and facet orientation as ``build_unit_mesh``
+    (the unit is the special case of one group of three chambers), with
+    ``n_chambers`` = the sum of the group sizes.  Extra sets:
+
+    * facets ``cavity_top_{group}`` / ``cavity_bottom_{group}`` (each group's
+      pockets; ``cavity_top`` / ``cavity_bottom`` still hold all),
+      ``outer_top`` / ``outer_bottom`` (the blocks' outer faces, y = +-(paper/2
+      + bot_layer + height));
+    * nodes ``backbone`` (every paper-layer node), ``clamp`` / ``end`` (x = 0 / L).
+
+    ``chamber_group`` names the group of each chamber.  Lengths mm.
+    """
+    items = list(units_per_group.items()) if isinstance(units_per_group, Mapping) else list(units_per_group)
+    names = tuple(str(k) for k, n in items for _ in range(int(n)))
+    if not names:
+        raise ValueError("the actuator needs at least one chamber")
+    g = dict(DEFAULT_GEOMETRY)
+    g.update(dict(geom or {}))
+    g["n_chambers"] = len(names)
+    return _chain_mesh(g, h, dim, paper_layers, names)
+
+
+def _chain_mesh(g: dict, h: float, dim: int, paper_layers: int, groups: tuple[str, ...] | None) -> UnitMesh:
+    """Chain of ``g["n_chambers"]`` chambers; ``groups`` (per chamber) adds the actuator's sets."""
     n = int(g["n_chambers"])
     d, gap, H, bl = g["depth"], g["gap"], g["height"], g["bot_layer"]
     tf, tu, ts, tp = g["ac_th_for"], g["ac_th_up"], g["ac_th_side"], g["paper_width"]
@@ -257,4 +295,17 @@ def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, p
     }
     if dim == 3:
         nodes["symmetry"] = np.flatnonzero(np.abs(p[2]) < tol)
-    return UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=g, h=float(h), contact_pairs=pairs)
+    if groups is not None:
+        for side, sgn in (("top", 1.0), ("bottom", -1.0)):
+            ys = sgn * mid[1]
+            in_z = np.ones(faces.shape[0], bool) if dim == 2 else mid[2] < g["width"] / 2 - ts + tol
+            for name in dict.fromkeys(groups):
+                sel = np.zeros(faces.shape[0], bool)
+                for k, (a, b) in enumerate(pockets):
+                    if groups[k] == name:
+                        sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yb - tol) & (ys < yp + tol) & in_z
+                facets[f"cavity_{side}_{name}"] = faces[sel]
+            facets[f"outer_{side}"] = faces[np.abs(ys - yt) < tol]
+        nodes["backbone"] = np.flatnonzero(paper)
+    return UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=g, h=float(h), contact_pairs=pairs,
+                    chamber_group=tuple(groups or ()))
