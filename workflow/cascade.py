@@ -85,6 +85,7 @@ __all__ = [
     "backbone_polyline",
     "plan_patient",
     "plans_dataset",
+    "patient_finger",
     "write_cascade_plan",
 ]
 
@@ -681,6 +682,44 @@ def plans_dataset(model: CascadeModel, plans: Sequence[Plan], *, tol_deg: float,
     return ds
 
 
+def patient_finger(patient: Mapping[str, Any], loads, moments, ccd, *, cascade_cfg: Mapping[str, Any],
+                   anthropometry: Mapping[str, Any]) -> tuple[Finger, str]:
+    """The patient's finger model as the plan builds it, and a note on its springs' source.
+
+    ``loads``, ``moments``, ``ccd``: the datasets of ``joint_loads.nc``,
+    ``moments.nc`` and ``ccd.nc``; ``cascade_cfg`` the config's ``cascade``
+    section (densities, gravity, section points).  Shared by the planning
+    and the FEA check (issue 9), so both see the same finger.
+    """
+    from workflow import finger as F
+
+    c = cascade_cfg
+    finger_name = str(patient.get("finger", "F3"))
+    coded = {d: float(v) for d, v in zip(loads["dimension"].values, loads["x"].values)}
+    measures = anthropometry["measures"]
+    dims = F.patient_dimensions_mm(measures, coded, float(anthropometry.get("coded_unit_sd", 1.0)),
+                                   patient.get("measurements_mm"))
+    # Shape of the passive curves: the design centre's, where a backend sampled more than the targets.
+    centre = ccd["run"].values[[str(m) == "Original" for m in ccd["marker"].values]]
+    curve = None
+    if centre.size and finger_name in moments["finger"].values:
+        mm = moments["moment_nm"].sel(run=centre[0], finger=finger_name)
+        mm = mm.sel(activation=mm["activation"].values[np.argmin(mm["activation"].values)])
+        curve = (moments["angle_deg"].values, mm.transpose("joint", "angle_deg").sel(joint=list(JOINTS)).values)
+    springs, spring_note = F.springs_from_loads(
+        loads["target_angle_deg"].sel(joint=list(JOINTS)).values,
+        loads["passive_moment_nm"].sel(joint=list(JOINTS)).values,
+        *(curve if curve is not None else (None, None)))
+    d = c["densities"]
+    fing = F.build_finger(
+        dims, springs,
+        {k: d[k] for k in ("flesh_proximal", "flesh_middle", "flesh_distal", "bone")},
+        gravity_m_s2=c["gravity_m_s2"], section_points=c.get("section_points"),
+        reference_dims_mm={k: float(v["mean"]) for k, v in measures.items()},
+    )
+    return fing, spring_note
+
+
 def write_cascade_plan(
     patient_name: str,
     patient: Mapping[str, Any],
@@ -706,37 +745,15 @@ def write_cascade_plan(
 
     import xarray as xr
 
-    from workflow import finger as F
     from workflow.provenance import write_dataset
 
     log = logging.getLogger(__name__)
     c = cascade_cfg
     loads = xr.load_dataset(joint_loads_nc)
-    moments = xr.load_dataset(moments_nc)
-    ccd = xr.load_dataset(ccd_nc)
+    fing, spring_note = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+                                       cascade_cfg=c, anthropometry=anthropometry)
     finger_name = str(patient.get("finger", "F3"))
-    coded = {d: float(v) for d, v in zip(loads["dimension"].values, loads["x"].values)}
-    measures = anthropometry["measures"]
-    dims = F.patient_dimensions_mm(measures, coded, float(anthropometry.get("coded_unit_sd", 1.0)),
-                                   patient.get("measurements_mm"))
-    # Shape of the passive curves: the design centre's, where a backend sampled more than the targets.
-    centre = ccd["run"].values[[str(m) == "Original" for m in ccd["marker"].values]]
-    curve = None
-    if centre.size and finger_name in moments["finger"].values:
-        mm = moments["moment_nm"].sel(run=centre[0], finger=finger_name)
-        mm = mm.sel(activation=mm["activation"].values[np.argmin(mm["activation"].values)])
-        curve = (moments["angle_deg"].values, mm.transpose("joint", "angle_deg").sel(joint=list(JOINTS)).values)
-    springs, spring_note = F.springs_from_loads(
-        loads["target_angle_deg"].sel(joint=list(JOINTS)).values,
-        loads["passive_moment_nm"].sel(joint=list(JOINTS)).values,
-        *(curve if curve is not None else (None, None)))
     d = c["densities"]
-    fing = F.build_finger(
-        dims, springs,
-        {k: d[k] for k in ("flesh_proximal", "flesh_middle", "flesh_distal", "bone")},
-        gravity_m_s2=c["gravity_m_s2"], section_points=c.get("section_points"),
-        reference_dims_mm={k: float(v["mean"]) for k, v in measures.items()},
-    )
     model = build_cascade(
         fing, unit, actuator_dims_mm=c["unit_geometry_mm"], silicone_density=d["silicone"],
         paper_density=d["paper"], cmc_length_fraction=c["cmc_length_fraction"], tip_units=c["tip_units"],
