@@ -19,6 +19,8 @@ include: "rules/musculoskeletal.smk"
 include: "rules/opensim.smk"
 include: "rules/tracking.smk"
 include: "rules/actuator.smk"
+include: "rules/surrogates.smk"
+include: "rules/cascade.smk"
 
 
 rule all:

@@ -48,6 +48,13 @@ def get_final_output():
         out += expand("results/tracking/{patient}.json", patient=PATIENTS)
     # Nonlinear FEA of the PNA unit (issue 4).
     out += ["results/actuator/unit_check.nc", "results/actuator/unit_3d_300kpa.vtu"]
+    # Pressure sweeps, surrogates and the 2D-to-3D mapping (issue 5).
+    out += expand("results/actuator/response_{fea}.nc", fea=["2d", "3d"])
+    out += expand("results/actuator/surrogate_{fea}.joblib", fea=["2d", "3d"])
+    out += ["results/actuator/surrogate_cv.nc", "results/actuator/mapping_2d3d.nc"]
+    # Cascade plans per patient and their validation against Tables 8 and 10 (issue 6).
+    out += expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS)
+    out += ["results/validation/cascade.nc"]
     return out
 
 

@@ -140,3 +140,19 @@ def test_gravity_droop_balances_every_joint_and_grows_with_weight():
     heavy = mean_finger(densities={k: 1.5 * v for k, v in DENSITIES.items()})
     th2, _ = F.gravity_droop_deg(heavy)
     assert np.all(th2 > th)
+
+
+def test_spring_from_curve_with_tone_offset_is_zero_at_zero_and_monotone():
+    """OpenSim's passive curve has a muscle-tone offset at 0 deg; the spring must not inherit it."""
+    ca = np.arange(0.0, 95.0, 5.0)
+    cm = 1e-3 * (ca - 45.0)  # -0.045 N m at 0 deg, crosses zero at 45 deg
+    curve = np.vstack([cm, cm, cm])
+    targets = np.array([[90.0, 90.0, 80.0]])
+    loads = np.array([[0.05, 0.02, 0.02]])
+    springs, _ = F.springs_from_loads(targets, loads, ca, curve)
+    for sp, a_max, m_pat in zip(springs, targets[0], loads[0]):
+        assert sp.moment_nm(0.0) == pytest.approx(0.0, abs=1e-12)
+        m = sp.moment_nm(ca)
+        assert np.all(np.diff(m) >= -1e-12)
+        # scaled by patient / curve at the largest target: (cm - cm0) * m_pat / cm(a_max)
+        assert sp.moment_nm(a_max) == pytest.approx(1e-3 * a_max * m_pat / (1e-3 * (a_max - 45.0)))

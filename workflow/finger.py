@@ -477,11 +477,16 @@ def springs_from_loads(
             ca = np.asarray(curve_angle_deg, float)
             cm = np.asarray(curve_moment_nm, float)[j]
             sel = np.isfinite(cm) & (ca > 0)
+            # The sampled moment at 0 deg can be non-zero (muscle tone of the
+            # passive activation); the spring is zero at 0 deg by definition
+            # (CLARIFICATIONS 14), so the curve is taken relative to it.
+            at0 = np.isfinite(cm) & (np.abs(ca) < 1e-9)
+            cm0 = float(cm[at0][0]) if at0.any() else 0.0
             if np.count_nonzero(sel) >= 3:
                 k = int(np.argmax(a))
                 ref = float(np.interp(a[k], ca[sel], cm[sel]))
                 if ref > 0:
-                    springs.append(JointSpring.from_points(ca[sel], cm[sel] * m[k] / ref))
+                    springs.append(JointSpring.from_points(ca[sel], (cm[sel] - cm0) * m[k] / ref))
                     notes.append(f"{joint}: curve shape scaled to the patient at {a[k]:g} deg")
                     used = True
         if not used:
