@@ -33,7 +33,7 @@ rule cascade_plan:
 
 rule validate_cascade:
     input:
-        plan=get_validation_plan(),
+        unpack(get_validation_plans),
         table08="resources/table08_planned_pressures_3d.csv",
         table10="resources/table10_experimental_pressures_mean_finger.csv",
         table07="resources/table07_unit_targets.csv",

@@ -117,6 +117,10 @@ def get_cascade_slice(wildcards):
     }
 
 
-def get_validation_plan():
-    """Input: the plan compared with the paper's tables (the mean finger by default)."""
-    return f"results/patients/{config['cascade']['validation_patient']}/cascade_plan.nc"
+def get_validation_plans(wildcards):
+    """Input function: the plan compared with Table 8 (the mean finger) and, if configured, the dummy's (Table 10)."""
+    c = config["cascade"]
+    out = {"plan": f"results/patients/{c['validation_patient']}/cascade_plan.nc"}
+    if c.get("dummy_patient"):
+        out["dummy_plan"] = f"results/patients/{c['dummy_patient']}/cascade_plan.nc"
+    return out

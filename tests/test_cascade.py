@@ -281,3 +281,30 @@ def test_untying_cmc_from_mcp_never_needs_more_pressure():
     assert np.max(np.abs(free.equilibrium.joint_angles_deg - target)) <= 3.0
     # The untied grid is coarser, so allow its resolution (a few kPa) in the comparison.
     assert free.pressures_kpa @ free.pressures_kpa <= 1.02 * (tied.pressures_kpa @ tied.pressures_kpa) + 100.0
+
+
+def test_dummy_finger_is_solid_pla_with_the_same_springs(config):
+    """CLARIFICATIONS 17: the dummy finger changes the masses (PLA), not the springs."""
+    import xarray as xr
+
+    from workflow.cascade import patient_finger
+
+    ex, joints = ["TGE1", "TGE4"], ["MCP", "PIP", "DIP"]
+    loads = xr.Dataset(
+        {"x": (("dimension",), np.zeros(3)),
+         "target_angle_deg": (("exercise", "joint"), [[0.0, 0.0, 0.0], [90.0, 100.0, 80.0]]),
+         "passive_moment_nm": (("exercise", "joint"), [[0.0, 0.0, 0.0], [0.05, 0.025, 0.02]])},
+        coords={"dimension": ["depth", "length", "breadth"], "exercise": ex, "joint": joints})
+    moments = xr.Dataset(coords={"finger": ["F2"]})  # no curve for F3: the patient's points alone
+    ccd = xr.Dataset({"marker": (("run",), ["Original"])}, coords={"run": [9]})
+    c = dict(config["cascade"], section_points=None)
+    human, _ = patient_finger({"finger": "F3"}, loads, moments, ccd, cascade_cfg=c,
+                              anthropometry=config["anthropometry"])
+    dummy, note = patient_finger({"finger": "F3", "model": "dummy"}, loads, moments, ccd, cascade_cfg=c,
+                                 anthropometry=config["anthropometry"])
+    assert "PLA" in note
+    d = c["densities"]
+    # every slice of the proximal segment is flesh+bone (4000/2000) in the human, PLA in the dummy
+    assert d["pla"] / d["flesh_proximal"] < dummy.masses_kg[0] / human.masses_kg[0] < d["pla"] / d["bone"]
+    for a in (30.0, 90.0):
+        assert [s.moment_nm(a) for s in dummy.springs] == [s.moment_nm(a) for s in human.springs]

@@ -34,6 +34,10 @@ def test_default_config_is_valid(cfg):
     (lambda c: c["patients"].update(p9={"measurements_mm": {"L3XX": 52.0}}), "L3XX"),
     (lambda c: c["patients"].update(p9={"coded": {"depth": 0, "length": 0}}), "breadth"),
     (lambda c: c["exercises"].update(TGE6={"mcp": 120, "pip": 0, "dip": 0}), "120"),
+    (lambda c: c["patients"]["mean"].update(model="robot"), "robot"),
+    (lambda c: c["cascade"].update(dummy_patient="nobody"), "nobody"),
+    (lambda c: c["cascade"].update(dummy_patient="mean"), "model: dummy"),
+    (lambda c: c["cascade"].update(validation_patient="nobody"), "validation_patient"),
 ])
 def test_bad_values_are_named(cfg, mutate, needle):
     mutate(cfg)

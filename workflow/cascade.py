@@ -710,7 +710,12 @@ def patient_finger(patient: Mapping[str, Any], loads, moments, ccd, *, cascade_c
         loads["target_angle_deg"].sel(joint=list(JOINTS)).values,
         loads["passive_moment_nm"].sel(joint=list(JOINTS)).values,
         *(curve if curve is not None else (None, None)))
-    d = c["densities"]
+    d = dict(c["densities"])
+    if patient.get("model", "human") == "dummy":
+        # The paper's test finger (Table 10): solid PLA of the same shape; its
+        # springs stand in for the passive joint moments, so those stay.
+        d.update({k: d.get("pla", 1240.0) for k in ("flesh_proximal", "flesh_middle", "flesh_distal", "bone")})
+        spring_note += f"; dummy finger: PLA {d['flesh_proximal']:g} kg/m^3 throughout"
     fing = F.build_finger(
         dims, springs,
         {k: d[k] for k in ("flesh_proximal", "flesh_middle", "flesh_distal", "bone")},

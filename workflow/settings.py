@@ -40,6 +40,14 @@ def check_config(config: Mapping[str, Any]) -> None:
                 raise ConfigError(f"patients.{name}.measurements_mm.{code}: no anthropometry (mean, SD) for this code")
             if not value > 0:
                 raise ConfigError(f"patients.{name}.measurements_mm.{code} = {value}: must be > 0 mm")
+    cascade = config.get("cascade", {})
+    for key in ("validation_patient", "dummy_patient"):
+        name = cascade.get(key)
+        if name and name not in config["patients"]:
+            raise ConfigError(f"cascade.{key} = {name!r}: no such patient (patients: {sorted(config['patients'])})")
+    dummy = cascade.get("dummy_patient")
+    if dummy and config["patients"][dummy].get("model", "human") != "dummy":
+        raise ConfigError(f"cascade.dummy_patient = {dummy!r}: that patient needs `model: dummy`")
     ms = config.get("musculoskeletal", {})
     if ms.get("backend", "table") == "table":
         path = Path(ms.get("table_path", ""))

@@ -42,32 +42,43 @@ def read_pressure_table(path: str | Path) -> pd.DataFrame:
 
 
 def compare_pressures(plan: xr.Dataset, references: Mapping[str, pd.DataFrame],
-                      rel_floor_kpa: float = 10.0) -> xr.Dataset:
+                      rel_floor_kpa: float = 10.0, plans: Mapping[str, xr.Dataset] | None = None) -> xr.Dataset:
     """Errors of the plan's pressures against each reference table.
 
     ``plan``: a ``cascade_plan.nc`` dataset; ``references``: {name: table},
-    the names becoming the ``table`` dimension.  Exercises missing from a
-    table are NaN there.
+    the names becoming the ``table`` dimension.  ``plans``: {name: plan} for
+    tables compared with another plan than ``plan`` (Table 10 with the dummy
+    finger's).  Exercises missing from a table are NaN there.
     """
     ex = [str(e) for e in plan["exercise"].values]
-    ours = plan["pressure_kpa"].sel(exercise=ex).values.reshape(len(ex), 8)
     names = list(references)
+    plans = dict(plans or {})
+    compared = [plans.get(n, plan) for n in names]
+    ours_t = np.stack([pl["pressure_kpa"].sel(exercise=ex).values.reshape(len(ex), 8) for pl in compared])
+    ours = ours_t[0] if not plans else ours_t
     ref = np.full((len(names), len(ex), 8), np.nan)
     for r, name in enumerate(names):
         tab = references[name]
         for i, e in enumerate(ex):
             if e in tab.index:
                 ref[r, i] = tab.loc[e].values
-    abs_err = np.abs(ours[None] - ref)
+    abs_err = np.abs(ours_t - ref)
     with np.errstate(invalid="ignore", divide="ignore"):
         rel = np.where(ref >= rel_floor_kpa, abs_err / ref, np.nan)
     achieved = np.asarray(plan["achieved"].values).astype(bool)
     sets = list(PAPER_REACHED)
     paper = np.array([[e in PAPER_REACHED[s] for e in ex] for s in sets])
-    agree = paper == achieved[None]
+    # the dummy-finger experiment is compared with the dummy's plan when there is one
+    dummy = plans.get("table10")
+    ours_sets = np.array([np.asarray(dummy["achieved"].values).astype(bool)
+                          if (dummy is not None and "dummy" in s) else achieved for s in sets])
+    agree = paper == ours_sets
+    ours_dims = ("exercise", "pressure") if not plans else ("table", "exercise", "pressure")
+    patients = [str(pl.attrs.get("patient", "")) for pl in compared]
     ds = xr.Dataset(
         {
-            "ours": (("exercise", "pressure"), ours, {"units": "kPa", "long_name": "our planned pressure (mean finger)"}),
+            "ours": (ours_dims, ours, {"units": "kPa", "long_name": "our planned pressure",
+                                       "patient_per_table": ", ".join(f"{n}: {p}" for n, p in zip(names, patients))}),
             "reference": (("table", "exercise", "pressure"), ref, {"units": "kPa", "long_name": "paper's pressure"}),
             "abs_error": (("table", "exercise", "pressure"), abs_err,
                           {"units": "kPa", "long_name": "|ours - reference|"}),
@@ -125,10 +136,17 @@ def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
     fig, axes = plt.subplots(1, len(ex), figsize=(3.0 * len(ex), 3.0), sharey=True, squeeze=False)
     x = np.arange(8)
     w = 0.8 / (1 + ds.sizes["table"])
+    per_table = "table" in ds["ours"].dims
+    w = 0.8 / (2 * ds.sizes["table"]) if per_table else w
     for ax, e in zip(axes[0], ex):
-        ax.bar(x - 0.4 + w / 2, ds["ours"].sel(exercise=e), w, label="ours")
+        if not per_table:
+            ax.bar(x - 0.4 + w / 2, ds["ours"].sel(exercise=e), w, label="ours")
         for k, r in enumerate(ds["table"].values):
-            ax.bar(x - 0.4 + w * (k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
+            if per_table:
+                ax.bar(x - 0.4 + w * (2 * k + 0.5), ds["ours"].sel(table=r, exercise=e), w, label=f"ours vs {r}")
+                ax.bar(x - 0.4 + w * (2 * k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
+            else:
+                ax.bar(x - 0.4 + w * (k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
         reached = bool(ds["ours_achieved"].sel(exercise=e))
         ax.set_title(f"{e} ({'reached' if reached else 'not reached'} by ours)", fontsize=8)
         ax.set_xticks(x, [p[2:] for p in ds["pressure"].values], rotation=90, fontsize=6)
@@ -143,16 +161,19 @@ def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
 
 def write_cascade_validation(plan_nc: str | Path, tables: Mapping[str, str | Path], out_nc: str | Path, *,
                              config_slice, rule: str = "validate_cascade", plot: str | Path | None = None,
-                             rel_floor_kpa: float = 10.0, table07: str | Path | None = None) -> xr.Dataset:
+                             rel_floor_kpa: float = 10.0, table07: str | Path | None = None,
+                             dummy_plan_nc: str | Path | None = None) -> xr.Dataset:
     """Read the mean finger's plan and the paper's tables, write ``results/validation/cascade.nc``.
 
     ``tables``: {name: pressure table CSV} (Tables 8 and 10); ``table07``: the
-    unit-moment targets, compared when given.
+    unit-moment targets, compared when given; ``dummy_plan_nc``: the PLA
+    dummy finger's plan, compared with ``table10`` (the paper's experiment).
     """
     from workflow.provenance import write_dataset
 
     plan = xr.load_dataset(plan_nc)
-    ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa)
+    plans = {"table10": xr.load_dataset(dummy_plan_nc)} if dummy_plan_nc and "table10" in tables else None
+    ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa, plans)
     if table07 is not None:
         ds = ds.merge(compare_unit_moments(plan, table07))
     ds.attrs["patient"] = str(plan.attrs.get("patient", ""))
