@@ -399,9 +399,15 @@ def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Seque
     def solve_ray(direction: Sequence[float], scales: np.ndarray) -> dict[str, np.ndarray]:
         p_top, p_bottom = (float(v) for v in direction)
         stops = tuple(float(v) for v in np.asarray(scales, float))
-        free = fem.solve_unit_from_config(actuator_config, dim, p_top, p_bottom, "free", mesh=mesh, stops=stops)
-        blocked = fem.solve_unit_from_config(actuator_config, dim, p_top, p_bottom, "blocked", mesh=mesh, stops=stops)
-        return samples_from_paths(direction, scales, free, blocked)
+        paths = {}
+        for case in ("free", "blocked"):
+            r = fem.solve_unit_from_config(actuator_config, dim, p_top, p_bottom, case, mesh=mesh, stops=stops)
+            # a 3D ray takes minutes per case: say so as each case ends
+            log.info("ray to (%.1f, %.1f) kPa, %s: %s at load factor %.3f, %d steps, %d Newton iterations, %.1f s",
+                     p_top, p_bottom, case, r.reason or "converged", r.load_factor, r.steps, r.newton_iterations,
+                     r.wall_time_s)
+            paths[case] = r
+        return samples_from_paths(direction, scales, paths["free"], paths["blocked"])
 
     return solve_ray
 
