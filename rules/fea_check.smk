@@ -1,0 +1,68 @@
+# Stage FEA check (issue 9): every plan checked by a 2D plane-strain FEA of the
+# whole actuator strapped to the patient's finger (paper Fig. 18-21), and the
+# stand-alone whole actuator in 2D and 3D (Fig. 22). Science in
+# workflow/fea_check.py, workflow/fea_model.py, workflow/fea_standalone.py and
+# workflow/fem. Input functions live in rules/common.smk (see the lead's notes):
+#   get_fea_exercises()      -> the exercises checked (config fea_check.exercises or all)
+#   get_fea_surrogates()     -> {"surrogate_2d": ..., "surrogate_3d": ...} when the 2D
+#                               pressures are mapped, else {}
+#   get_fea_check_slice(wc)  -> the config a patient's check depends on
+
+
+rule fea_check:
+    input:
+        unpack(get_fea_surrogates),
+        plan="results/patients/{patient}/cascade_plan.nc",
+        ccd="results/doe/ccd.nc",
+        moments="results/musculoskeletal/moments.nc",
+        joint_loads="results/patients/{patient}/joint_loads.nc",
+        code=code_files("fem", "fea_check", "fea_model", "cascade", "finger", "mapping", "surrogates",
+                        "plots_fea_check"),
+    output:
+        nc="results/patients/{patient}/fea_check.nc",
+        vtu=expand("results/patients/{{patient}}/fea_check_{exercise}.vtu", exercise=get_fea_exercises()),
+        plot=report(
+            "results/patients/{patient}/fea_check.png",
+            caption="../report/fea_check.rst",
+            category="FEA check",
+            subcategory="{patient}",
+        ),
+    params:
+        patient=get_patient,
+        fea_check=config["fea_check"],
+        actuator=config["actuator"],
+        cascade=config["cascade"],
+        anthropometry=config["anthropometry"],
+        config_slice=get_fea_check_slice,
+    log:
+        "logs/fea_check/fea_check/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/fea_check_{patient}.tsv"
+    script:
+        "../workflow/scripts/fea_check.py"
+
+
+rule standalone_actuator:
+    input:
+        unpack(get_fea_surrogates),
+        plan="results/patients/{patient}/cascade_plan.nc",
+        code=code_files("fem", "fea_standalone", "fea_check", "mapping", "surrogates", "plots_fea_check"),
+    output:
+        nc="results/patients/{patient}/standalone_actuator.nc",
+        plot=report(
+            "results/patients/{patient}/standalone_actuator.png",
+            caption="../report/standalone_actuator.rst",
+            category="FEA check",
+            subcategory="{patient}",
+        ),
+    params:
+        fea_check=config["fea_check"],
+        actuator=config["actuator"],
+        cascade=config["cascade"],
+        config_slice=get_fea_check_slice,
+    log:
+        "logs/fea_check/standalone_actuator/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/standalone_actuator_{patient}.tsv"
+    script:
+        "../workflow/scripts/standalone_actuator.py"

@@ -1,0 +1,139 @@
+"""Stand-alone whole actuators at the plan's pressures, 2D against 3D (issue 9 item 6, paper Fig. 22).
+
+The actuator of the plan (``units_per_group``), hand end clamped, no finger,
+no gravity, each exercise's pressures ramped from zero, in up to three models:
+
+* ``2d_mapped``: plane strain at the 2D pressures of the 2D-to-3D mapping
+  (:func:`workflow.fea_check.pressures_2d`), the pressures the FEA check uses;
+* ``2d_plan``: plane strain at the planned (3D) pressures unchanged (the
+  paper's "limited bending" comparison the other way round);
+* ``3d_plan``: the 3D half model at the planned pressures (coarse mesh).
+
+Compared by the backbone curve (paper-layer mid-line, resampled at common
+stations along the undeformed actuator) and the tip angle.  A model that does
+not reach the full pressures is kept with its last converged load factor.
+Lengths mm, angles deg, pressures kPa.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+from workflow import fem
+from workflow.cascade import CHAMBERS, GROUPS
+from workflow.fea_check import MAPPING_FLAGS, load_surrogate_angles, pressures_2d
+from workflow.fem._actuator import solve_standalone
+from workflow.fem._mesh import build_actuator_mesh
+
+__all__ = ["MODELS", "resample_backbone", "standalone_dataset", "write_standalone"]
+
+log = logging.getLogger(__name__)
+MODELS = ("2d_mapped", "2d_plan", "3d_plan")
+
+
+def resample_backbone(curve: np.ndarray, ref: np.ndarray, stations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Deformed (x, y) of the backbone at reference positions ``stations`` (mm along the undeformed actuator)."""
+    return np.interp(stations, ref[:, 0], curve[:, 0]), np.interp(stations, ref[:, 0], curve[:, 1])
+
+
+def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Sequence[str], actuator_cfg: Mapping,
+                       h_2d_mm: float, h_3d_mm: float, solver: Mapping, p2: np.ndarray, flag: np.ndarray,
+                       n_stations: int = 41) -> xr.Dataset:
+    """Solve every (exercise, model) and collect curves and tip angles."""
+    geom = dict(fem.DEFAULT_GEOMETRY)
+    geom.update(dict(actuator_cfg.get("geometry", {})))
+    upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
+    n = sum(upg.values())
+    length = n * geom["depth"] + (n - 1) * geom["gap"]
+    stations = np.linspace(0.0, length, n_stations)
+    p_plan = plan["pressure_kpa"].sel(exercise=list(exercises), group=list(GROUPS), chamber=list(CHAMBERS)).values
+    shape = (len(exercises), len(models))
+    bx = np.full(shape + (n_stations,), np.nan)
+    by = np.full_like(bx, np.nan)
+    tip, lam, wall = np.full(shape, np.nan), np.zeros(shape), np.zeros(shape)
+    status = np.full(shape, -1, dtype="i1")
+    its, ndofs = np.zeros(shape, dtype="i4"), np.zeros(len(models), dtype="i4")
+    meshes = {}
+    mat = actuator_cfg.get("material")
+    contact = {k: v for k, v in dict(actuator_cfg.get("contact", {})).items() if k != "enabled"}
+    for j, m in enumerate(models):
+        dim = 3 if m.startswith("3d") else 2
+        if dim not in meshes:
+            meshes[dim] = build_actuator_mesh(geom, upg, h=h_3d_mm if dim == 3 else h_2d_mm, dim=dim,
+                                              paper_layers=int(actuator_cfg.get("mesh", {}).get("paper_layers", 1)))
+        um = meshes[dim]
+        for i, ex in enumerate(exercises):
+            pk = p2[i] if m == "2d_mapped" else p_plan[i]
+            press = {g: (float(pk[k, 0]), float(pk[k, 1])) for k, g in enumerate(GROUPS)}
+            r = solve_standalone(um, press, material=mat, contact_options=contact, solver=solver)
+            bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)
+            tip[i, j], lam[i, j], status[i, j] = r.tip_angle_deg, r.load_factor, r.status
+            its[i, j], wall[i, j], ndofs[j] = r.newton_iterations, r.wall_time_s, r.ndofs
+            log.info("%s %s: tip %.1f deg, status %d at %.3f, %d its, %.1f s, %d dofs", ex, m, r.tip_angle_deg,
+                     r.status, r.load_factor, r.newton_iterations, r.wall_time_s, r.ndofs)
+    flag_vals = np.array(sorted(fem.STATUS_FLAGS), dtype="i1")
+    map_vals = np.array(sorted(MAPPING_FLAGS), dtype="i1")
+    ds = xr.Dataset(
+        {
+            "backbone_x_mm": (("exercise", "model", "station"), bx, {"units": "mm", "long_name": "deformed backbone x (hand end at 0)"}),
+            "backbone_y_mm": (("exercise", "model", "station"), by, {"units": "mm", "long_name": "deformed backbone y (paper layer at 0)"}),
+            "tip_angle_deg": (("exercise", "model"), tip, {"units": "degree", "long_name": "backbone rotation at the tip (positive towards the bottom side)"}),
+            "converged": (("exercise", "model"), (status == 0) & (lam >= 1 - 1e-9), {"units": "1", "long_name": "pressures reached in full"}),
+            "load_factor": (("exercise", "model"), lam, {"units": "1", "long_name": "last converged fraction of the pressures"}),
+            "status": (("exercise", "model"), status, {"units": "1", "long_name": "solver status", "flag_values": flag_vals,
+                                                       "flag_meanings": " ".join(fem.STATUS_FLAGS[int(v)] for v in flag_vals)}),
+            "newton_iterations": (("exercise", "model"), its, {"units": "1", "long_name": "Newton iterations"}),
+            "wall_time_s": (("exercise", "model"), wall, {"units": "s", "long_name": "wall time of the solve"}),
+            "ndofs": ("model", ndofs, {"units": "1", "long_name": "degrees of freedom"}),
+            "pressure_plan_kpa": (("exercise", "group", "chamber"), p_plan, {"units": "kPa", "long_name": "planned (3D) pressure"}),
+            "pressure_2d_kpa": (("exercise", "group", "chamber"), p2, {"units": "kPa", "long_name": "2D pressure of the mapping"}),
+            "mapping_status": (("exercise", "group"), flag.astype("i1"), {
+                "units": "1", "long_name": "how the 2D pressure pair was obtained",
+                "flag_values": map_vals, "flag_meanings": " ".join(MAPPING_FLAGS[int(v)] for v in map_vals)}),
+        },
+        coords={"exercise": list(exercises), "model": list(models), "station": stations, "group": list(GROUPS),
+                "chamber": list(CHAMBERS)},
+    )
+    ds["station"].attrs = {"units": "mm", "long_name": "position along the undeformed backbone from the hand end"}
+    if "2d_mapped" in models and "3d_plan" in models:
+        d = np.hypot(ds["backbone_x_mm"].sel(model="2d_mapped") - ds["backbone_x_mm"].sel(model="3d_plan"),
+                     ds["backbone_y_mm"].sel(model="2d_mapped") - ds["backbone_y_mm"].sel(model="3d_plan"))
+        ds["profile_rms_mm"] = (("exercise",), np.sqrt((d**2).mean("station")).values,
+                                {"units": "mm", "long_name": "RMS distance of the 2d_mapped and 3d_plan backbone curves"})
+        ds["tip_angle_diff_deg"] = (("exercise",), (ds["tip_angle_deg"].sel(model="2d_mapped") - ds["tip_angle_deg"].sel(model="3d_plan")).values,
+                                    {"units": "degree", "long_name": "tip angle 2d_mapped minus 3d_plan"})
+    ds.attrs.update({"h_2d_mm": float(h_2d_mm), "h_3d_mm": float(h_3d_mm), "units_per_group": str(upg)})
+    return ds
+
+
+def write_standalone(patient_name: str, *, plan_nc: str, out_nc: str, out_png: str | None, fea_cfg: Mapping,
+                     actuator_cfg: Mapping, cascade_cfg: Mapping, config_slice: Any, surrogate_2d: str | None = None,
+                     surrogate_3d: str | None = None, rule: str = "standalone_actuator") -> xr.Dataset:
+    """The rule's entry point (see the module docstring)."""
+    from workflow.provenance import write_dataset
+
+    plan = xr.load_dataset(plan_nc)
+    sa = dict(fea_cfg.get("standalone", {}))
+    ex = list(sa.get("exercises") or fea_cfg.get("exercises") or [str(e) for e in plan["exercise"].values])
+    models = list(sa.get("models", MODELS))
+    use_map = bool(fea_cfg.get("map_pressures", True)) and cascade_cfg.get("surrogate", "3d") == "3d"
+    a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
+    p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
+    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
+    solver = dict(actuator_cfg.get("solver", {}))
+    solver.update(dict(fea_cfg.get("solver", {})))
+    ds = standalone_dataset(plan, exercises=ex, models=models, actuator_cfg=actuator_cfg,
+                            h_2d_mm=float(fea_cfg.get("h_actuator_mm", 2.0)), h_3d_mm=float(sa.get("h_3d_mm", 2.5)),
+                            solver=solver, p2=p2, flag=flag)
+    ds.attrs["patient"] = patient_name
+    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
+                  title=f"Stand-alone whole actuators at the plan's pressures, patient {patient_name}")
+    if out_png:
+        from workflow.plots_fea_check import plot_standalone
+
+        plot_standalone(ds, out_png, title=f"patient {patient_name}")
+    return ds

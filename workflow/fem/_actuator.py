@@ -1,0 +1,122 @@
+"""The whole cascaded actuator (issue 9): group pressures, stand-alone solve, backbone curve.
+
+The actuator is the unit model's chain with ``sum(units_per_group)`` chambers
+(``build_actuator_mesh``): same materials (``material_constants``), follower
+pressure per group and side (``cavity_{top,bottom}_{group}``) and penalty
+self-contact across every gap (``contact_pairs_from_mesh``).  Stand-alone
+(Fig. 22): the hand end (x = 0) is clamped, no finger, no gravity; 3D adds the
+symmetry condition u_z = 0 on z = 0 of the half model.
+
+Measurements: the *backbone curve* is the paper layer's mid-line, the mean
+position of its nodes per grid column along the actuator (mm); the *tip
+angle* is the rotation of its last element column, positive clockwise in the
+x-y plane (towards the bottom side = the palm, CONTRACT signs), in degrees.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+from ._assembly import SolidAssembler
+from ._contact import contact_pairs_from_mesh
+from ._mesh import UnitMesh
+from ._solve import DEFAULT_SOLVER, Model, solve_path
+from ._unit import DEFAULT_CONTACT, material_constants
+
+__all__ = ["group_pressures", "actuator_model", "backbone_curve", "tip_angle_deg", "StandaloneResult",
+           "solve_standalone"]
+
+
+def group_pressures(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float]], node_offset: int = 0) -> dict:
+    """``Model`` pressures {name: (facets, p in MPa)} from {group: (P_T, P_B) in kPa}.
+
+    Groups of the mesh missing from ``pressures_kpa`` get zero pressure.
+    ``node_offset`` shifts the facets' node numbers (actuator inside a larger mesh).
+    """
+    out = {}
+    for g in dict.fromkeys(um.chamber_group):
+        pt, pb = pressures_kpa.get(g, (0.0, 0.0))
+        out[f"{g}_top"] = (um.facets[f"cavity_top_{g}"] + node_offset, 1e-3 * float(pt))
+        out[f"{g}_bottom"] = (um.facets[f"cavity_bottom_{g}"] + node_offset, 1e-3 * float(pb))
+    return out
+
+
+def contact_penalty(mat: Mapping, h: float, contact: Mapping) -> float:
+    """Silicone self-contact penalty eps = factor mu0 / h (MPa/mm), as the unit model."""
+    return float(contact["penalty_factor"]) * mat["mu0"] / h
+
+
+def actuator_model(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float]], *, material: Mapping | None = None,
+                   contact_options: Mapping | None = None, contact: bool = True) -> Model:
+    """Stand-alone whole actuator: clamped hand end, group pressures at load factor 1."""
+    mat = material_constants(material)
+    solid = SolidAssembler(um.mesh, um.material, mat)
+    dim = um.dim
+    fixed = [(dim * um.nodes["clamp"][:, None] + np.arange(dim)).ravel()]
+    if dim == 3:
+        fixed.append(dim * um.nodes["symmetry"] + 2)
+    copts = dict(DEFAULT_CONTACT)
+    copts.update(dict(contact_options or {}))
+    pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["two_pass"], copts["extend"],
+                                    copts["smoothing_mm"]) if contact else []
+    return Model(solid, pressures=group_pressures(um, pressures_kpa), contacts=pairs,
+                 penalty=contact_penalty(mat, um.h, copts), fixed=np.unique(np.concatenate(fixed)))
+
+
+def backbone_curve(x: np.ndarray, p_ref: np.ndarray, backbone_nodes: np.ndarray) -> np.ndarray:
+    """Mid-line of the paper layer (ncol, dim): mean current position per reference x column, mm."""
+    xr = np.round(p_ref[0, backbone_nodes], 6)
+    cols, inv = np.unique(xr, return_inverse=True)
+    cnt = np.bincount(inv)
+    return np.stack([np.bincount(inv, weights=x[d, backbone_nodes]) / cnt for d in range(x.shape[0])], axis=1)
+
+
+def tip_angle_deg(curve: np.ndarray) -> float:
+    """Rotation of the backbone's last segment from the +x axis, clockwise positive, deg."""
+    d = curve[-1] - curve[-2]
+    return float(-np.degrees(np.arctan2(d[1], d[0])))
+
+
+@dataclass
+class StandaloneResult:
+    """Stand-alone actuator at the given group pressures (kPa)."""
+
+    dim: int
+    status: int
+    reason: str
+    load_factor: float
+    tip_angle_deg: float
+    backbone_mm: np.ndarray  # (ncol, dim) deformed mid-line
+    backbone_ref_mm: np.ndarray
+    newton_iterations: int
+    steps: int
+    wall_time_s: float
+    ndofs: int
+    max_penetration_mm: float
+    displacement: np.ndarray | None = field(default=None, repr=False)
+
+
+def solve_standalone(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float]], *, material: Mapping | None = None,
+                     contact_options: Mapping | None = None, contact: bool = True, solver: Mapping | None = None,
+                     keep_displacement: bool = False) -> StandaloneResult:
+    """Ramp the group pressures from zero on the clamped actuator; never raises for a failed path."""
+    t0 = time.perf_counter()
+    model = actuator_model(um, pressures_kpa, material=material, contact_options=contact_options, contact=contact)
+    opts = dict(DEFAULT_SOLVER)
+    opts.update(dict(solver or {}))
+    p_ref = um.mesh.p
+    bb = um.nodes["backbone"]
+    res = solve_path(model, p_ref, opts)
+    x = model.positions(res.u, p_ref)
+    curve = backbone_curve(x, p_ref, bb)
+    gmin = min([h.get("gmin", np.inf) for h in res.history], default=np.inf)
+    return StandaloneResult(
+        dim=um.dim, status=res.status, reason=res.reason, load_factor=res.lam, tip_angle_deg=tip_angle_deg(curve),
+        backbone_mm=curve, backbone_ref_mm=backbone_curve(p_ref, p_ref, bb), newton_iterations=res.iterations,
+        steps=res.steps, wall_time_s=time.perf_counter() - t0, ndofs=model.n,
+        max_penetration_mm=float(max(0.0, -gmin)) if np.isfinite(gmin) else 0.0,
+        displacement=res.u if keep_displacement else None)
