@@ -1,0 +1,176 @@
+"""FEA check parts that can fail silently (issue 9): hinge springs, finger droop, straight
+actuator at zero and at equal pressures, the actuator mesh's group sets, pressure mapping flags.
+
+Coarse meshes only; the whole coupled check runs in the smoke workflow and the benchmark.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workflow import fem
+from workflow import finger as F
+from workflow.fea_check import pressures_2d
+from workflow.fea_model import finger_profiles, lame, spring_callables
+from workflow.fem._actuator import solve_standalone
+from workflow.fem._coupled import nodal_body_force, cell_areas
+from workflow.fem._finger2d import BONE, FLESH, DeadLoad, HingeSpring, StrapSpring, build_finger_mesh
+from workflow.fem._mesh import build_actuator_mesh
+
+from test_finger import DENSITIES, SECTION, mean_finger, measures
+
+SOLVER = {"initial_step": 0.1, "max_iter": 30, "grow_below_iter": 10, "max_steps": 80, "atol": 1e-8}
+
+
+def test_actuator_mesh_is_the_unit_chain_with_group_sets():
+    unit = fem.build_unit_mesh(h=2.0)
+    act = build_actuator_mesh(None, {"A": 3}, h=2.0)
+    np.testing.assert_array_equal(unit.mesh.p, act.mesh.p)
+    np.testing.assert_array_equal(unit.mesh.t, act.mesh.t)
+    big = build_actuator_mesh(None, {"CMC": 2, "MCP": 3}, h=2.0)
+    assert big.length == pytest.approx(5 * 6.8 + 4 * 1.0)
+    n_cmc, n_mcp = len(big.facets["cavity_top_CMC"]), len(big.facets["cavity_top_MCP"])
+    assert n_cmc * 3 == n_mcp * 2 and n_cmc + n_mcp == len(big.facets["cavity_top"])
+    assert len(big.contact_pairs) == 2 * 4  # every gap, both sides
+
+
+def _pivot_points(theta):
+    """Chord A fixed along +x from the origin; chord B from the origin at -theta (flexion = clockwise)."""
+    p_ref = np.array([[-10.0, 0.0, 10.0], [0.0, 0.0, 0.0]])
+    c, s = np.cos(-theta), np.sin(-theta)
+    x = p_ref.copy()
+    x[:, 2] = [10 * c, 10 * s]
+    return p_ref, x
+
+
+def test_hinge_spring_reproduces_its_moment_angle_curve():
+    spring = F.JointSpring.from_points([30, 60, 90], [0.01, 0.03, 0.058])
+    moment, stiffness = spring_callables(spring, 20.0)
+    for deg in (5.0, 45.0, 75.0, 100.0):  # not on a sample (the curve has kinks there)
+        p_ref, x = _pivot_points(np.radians(deg))
+        h = HingeSpring(6, p_ref, (0, 1), (1, 2), moment, stiffness)
+        assert np.degrees(h.angle(x)) == pytest.approx(deg)
+        f, K = h.evaluate(x, None, 1.0)
+        # moment of the forces about the pivot = the spring's restoring moment (clockwise force on B = flexion)
+        r = x[:, 2] - x[:, 1]
+        m_b = r[0] * f[5] - r[1] * f[4]
+        assert -m_b * 20 * 1e-3 == pytest.approx(float(spring.moment_nm(deg)), rel=1e-9)
+        # consistent tangent
+        du = np.random.default_rng(1).normal(size=6)
+        e = 1e-6
+        fp, _ = h.evaluate(x + e * du.reshape(-1, 2).T, None, 1.0, False)
+        fm, _ = h.evaluate(x - e * du.reshape(-1, 2).T, None, 1.0, False)
+        np.testing.assert_allclose(K @ du, (fp - fm) / (2 * e), rtol=1e-5, atol=1e-9)
+
+
+def test_strap_spring_is_rigid_body_invariant():
+    p = np.array([[0.0, 10.0, 20.0, 10.0], [0.0, 0.0, 0.0, 8.0]])
+    strap = StrapSpring(8, p, 3, [(0, 1), (1, 2)], 12.0)
+    c, s = np.cos(0.7), np.sin(0.7)
+    x = np.array([[c, -s], [s, c]]) @ p + np.array([[3.0], [-2.0]])
+    assert strap.force(x) == pytest.approx(0.0, abs=1e-12)
+    x[:, 3] += [0.0, 0.5]
+    assert strap.force(x) == pytest.approx(6.0)
+
+
+def _finger_only(h=3.0, stiff=(0.15, 0.06, 0.02)):
+    """FE finger (flesh, bone, hinges, gravity), MCP pinned; stiff linear springs keep the droop small."""
+    springs = [F.JointSpring.linear(k / 90.0) for k in stiff]
+    finger = mean_finger(springs=springs, densities=DENSITIES)
+    ref = {k: v["mean"] for k, v in measures().items()}
+    fm = build_finger_mesh(finger_profiles(finger, str(SECTION), ref), h=h)
+    import skfem
+
+    m = skfem.MeshQuad(fm.p, fm.t)
+    mat = {"c10": 0, "c01": 0, "c20": 0, "bulk": 0, "paper_mu": 0, "paper_lambda": 0,
+           "neo_hooke": {FLESH: lame(0.024, 0.4), BONE: lame(20000.0, 0.3)}}
+    solid = fem.SolidAssembler(m, fm.material, mat)
+    n = 2 * fm.p.shape[1]
+    W = 20.0
+    area = cell_areas(m)
+    b = np.zeros(area.size)
+    flesh = (DENSITIES["flesh_proximal"], DENSITIES["flesh_middle"], DENSITIES["flesh_distal"])
+    for k in range(3):
+        sel = fm.segment == k
+        rho = np.where(fm.material[sel] == BONE, DENSITIES["bone"], flesh[k])
+        b[sel] = -rho * finger.segments[k].mass_kg * 9.81 / W / float(np.sum(rho * area[sel]))
+    hinges = [HingeSpring(n, fm.p, None if j == 0 else fm.chords[j - 1], fm.chords[j], *spring_callables(s, W))
+              for j, s in enumerate(springs)]
+    mcp = fm.nodes["joint_MCP"]
+    model = fem.Model(solid, fixed=[2 * mcp, 2 * mcp + 1], extras=hinges + [DeadLoad(nodal_body_force(m, b))])
+    return finger, fm, model, hinges
+
+
+@pytest.mark.skipif(not SECTION.exists(), reason="section points not available")
+def test_finger_alone_droops_by_the_angle_its_springs_predict():
+    finger, fm, model, hinges = _finger_only()
+    res = fem.solve_path(model, fm.p, SOLVER)
+    assert res.status == 0
+    x = model.positions(res.u, fm.p)
+    fea = np.degrees([h.angle(x) for h in hinges])
+    rigid, ok = F.gravity_droop_deg(finger)
+    assert ok and np.all(rigid > 1.0)
+    # same masses; the 2D section's centres of mass and the flesh's sag differ slightly from the rigid model's
+    np.testing.assert_allclose(fea, rigid, rtol=0.1, atol=0.5)
+
+
+def test_zero_pressure_leaves_the_actuator_straight_and_equal_pressures_do_not_bend_it():
+    um = build_actuator_mesh(None, {"A": 2, "B": 2}, h=2.5)
+    r0 = solve_standalone(um, {}, solver=SOLVER)
+    assert r0.status == 0 and r0.tip_angle_deg == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(r0.backbone_mm[:, 1], 0.0, atol=1e-9)
+    r = solve_standalone(um, {"A": (100.0, 100.0), "B": (100.0, 100.0)}, solver=SOLVER)
+    assert r.status == 0
+    assert abs(r.tip_angle_deg) < 0.05
+    np.testing.assert_allclose(r.backbone_mm[:, 1], 0.0, atol=0.02)
+    # top only bends it towards the bottom side (positive), as the unit
+    rt = solve_standalone(um, {"A": (60.0, 0.0), "B": (60.0, 0.0)}, solver=SOLVER)
+    assert rt.status == 0 and rt.tip_angle_deg > 5.0 and rt.backbone_mm[-1, 1] < 0
+
+
+def test_pressure_mapping_flags():
+    p3 = np.array([[[300.0, 0.0], [100.0, 100.0]], [[0.0, 0.0], [290.0, 0.0]]])
+    same, flag = pressures_2d(p3, None, None, p_max_2d_kpa=300.0)
+    np.testing.assert_array_equal(same, p3)
+    assert np.all(flag == 3)
+
+    def a3(pt, pb):
+        return 0.05 * (np.asarray(pt) - np.asarray(pb))
+
+    def a2(pt, pb):
+        return 0.025 * (np.asarray(pt) - np.asarray(pb))
+
+    p2, flag = pressures_2d(p3, a3, a2, p_max_2d_kpa=400.0)
+    assert flag[0, 1] == 1 and np.allclose(p2[0, 1], [100, 100])  # equal pressures kept
+    assert flag[1, 1] == 2 and p2[1, 1, 0] == pytest.approx(400.0)  # 580 kPa needed: capped at the grid edge
+    assert flag[0, 0] == 2  # 600 kPa needed
+
+
+@pytest.mark.skipif(not SECTION.exists(), reason="section points not available")
+def test_straps_hold_the_finger_on_the_actuator_under_gravity():
+    """Coupled model at a coarse mesh, gravity only: the finger hangs from the straps,
+    the strap points stay on the actuator (gap = force / k) and no contact penetrates
+    beyond the bound of config fea_check.penetration_bound_mm (0.1 mm)."""
+    import yaml
+    from pathlib import Path
+
+    from workflow.fea_model import DEFAULT_FEA_CHECK, build_patient_fea
+    from workflow.fem._coupled import solve_coupled
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "config.yaml").read_text())
+    springs = [F.JointSpring.linear(k / 90.0) for k in (0.15, 0.06, 0.02)]
+    finger = mean_finger(springs=springs, densities=DENSITIES)
+    casc = dict(cfg["cascade"], section_points=str(SECTION))
+    fea = build_patient_fea(finger, {"CMC": 2, "MCP": 6, "PIP": 4, "DIP": 4}, actuator_cfg=cfg["actuator"],
+                            cascade_cfg=casc, reference_dims_mm={k: v["mean"] for k, v in measures().items()},
+                            fea_cfg={"h_actuator_mm": 3.0, "h_finger_mm": 3.0})
+    res = solve_coupled(fea.setup, {}, solver=dict(SOLVER, atol=1e-6, max_steps=150))
+    assert res.status == 0 and res.phase == "pressure" and res.load_factor == 1.0
+    assert res.max_penetration_mm <= DEFAULT_FEA_CHECK["penetration_bound_mm"]
+    k = fea.setup.strap_k
+    for joint, force in res.strap_forces.items():
+        assert force > 0 and force / k < 0.05  # strap stretch below 0.05 mm: the finger stays on
+    assert np.all(res.joint_angles_deg > 0)  # the finger droops (flexes) under its weight
+    weight = abs(float(np.sum(fea.setup.gravity[1::2])))
+    assert abs(res.slide_force) < 1e-3 * weight  # the regularising spring carries next to nothing
