@@ -21,6 +21,7 @@ include: "rules/tracking.smk"
 include: "rules/actuator.smk"
 include: "rules/surrogates.smk"
 include: "rules/cascade.smk"
+include: "rules/fea_check.smk"
 
 
 rule all:

@@ -124,3 +124,21 @@ def get_validation_plans(wildcards):
     if c.get("dummy_patient"):
         out["dummy_plan"] = f"results/patients/{c['dummy_patient']}/cascade_plan.nc"
     return out
+
+
+# --- Stage FEA check (issue 9) -------------------------------------------------
+def get_fea_exercises():
+    """The exercises the FEA check runs (config fea_check.exercises, else all)."""
+    return list(config["fea_check"]["exercises"] or config["exercises"])
+
+
+def get_fea_surrogates(wildcards):
+    """Input function: the surrogates that map the plan's 3D pressures to 2D, when the check maps them."""
+    if config["fea_check"]["map_pressures"] and config["cascade"]["surrogate"] == "3d":
+        return {f"surrogate_{f}": f"results/actuator/surrogate_{f}.joblib" for f in ("2d", "3d")}
+    return {}
+
+
+def get_fea_check_slice(wildcards):
+    """Param function: the config one patient's FEA check depends on."""
+    return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": config["fea_check"]}
