@@ -17,6 +17,14 @@ steps land on given s.  With the config section::
 
 A stalled ray returns ``status`` > 0 with the last converged ``load_factor``.
 
+Case ``rotation`` holds the right end at a prescribed inclination and measures
+the couple (the moment-angle curve between free and blocked; issue 5 item 4)::
+
+    res = fem.solve_unit(mesh, 180, 0, case="rotation", end_angle_deg=30.0, end_hold="backbone")
+
+``end_hold`` (blocked and rotation): ``face`` holds the whole end face plane,
+``backbone`` only its paper and base layers (see ``held_end_nodes``).
+
 Physics: three-term Mooney-Rivlin silicone on isochoric invariants with a
 mean-dilatation (Q1/P0, condensed) volumetric part K = bulk_ratio * mu0;
 compressible neo-Hooke paper layer (E = 1.2 GPa, nu = 0.2); follower
@@ -33,13 +41,16 @@ from ._material import mooney_rivlin_isochoric, neo_hooke_compressible
 from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh
 from ._pressure import pressure_load
 from ._solve import DEFAULT_SOLVER, STATUS_FLAGS, Model, PathResult, linear_solve, solve_path
-from ._unit import DEFAULT_CONTACT, DEFAULT_MATERIAL, UnitResult, material_constants, solve_unit, unit_model
+from ._unit import (CASES, DEFAULT_CONTACT, DEFAULT_MATERIAL, END_HOLDS, UnitResult, clamp_inclination_deg, clamp_rotation,
+                    held_end_nodes, material_constants, solve_unit, unit_model)
 
 __all__ = [
+    "CASES",
     "DEFAULT_CONTACT",
     "DEFAULT_GEOMETRY",
     "DEFAULT_MATERIAL",
     "DEFAULT_SOLVER",
+    "END_HOLDS",
     "STATUS_FLAGS",
     "ContactPair",
     "Model",
@@ -49,6 +60,9 @@ __all__ = [
     "UnitResult",
     "build_grid_mesh",
     "build_unit_mesh",
+    "clamp_inclination_deg",
+    "clamp_rotation",
+    "held_end_nodes",
     "linear_solve",
     "material_constants",
     "mooney_rivlin_isochoric",

@@ -4,8 +4,8 @@ Boundary conditions (CLARIFICATIONS 1): the left end face (x = 0) is clamped.
 *free*: the right end is free; the bending angle is the rotation of the
 strain-limiting backbone at the right end, from the direction of the paper
 layer's last element column (mean position of its paper nodes at x = L minus
-that at the previous grid column).  *blocked*: every node of the right end face
-shares one axial displacement (the face stays plane and perpendicular to the
+that at the previous grid column).  *blocked*: every held node of the right
+end face (``end_hold``, below; default all of them) shares one axial displacement (the face stays plane and perpendicular to the
 undeformed axis, i.e. its rotation is held at zero) while it may slide
 axially and sideways as a whole, so the constraint forces have no resultant
 and form a pure couple M = sum_i (x_i r_yi - y_i r_xi) over the face.  The
@@ -18,6 +18,39 @@ the x-y plane, away from the top chambers) and a positive moment.  Per unit:
 angle / n_chambers; the blocked moment is the same in every chamber and is
 not divided.  Full width: 2D values per mm x ``width``; 3D half model x 2.
 3D adds the symmetry condition u_z = 0 on z = 0.
+
+*rotation* (CLARIFICATIONS 6, issue 5 item 4): the right end face is held
+plane at a prescribed total inclination ``end_angle_deg`` (relative to the
+clamp, positive = the sense of P_T bending) while free to slide axially and
+sideways, the generalisation of *blocked* (inclination 0).  Implementation:
+the end face keeps exactly the blocked tie (one shared x displacement, y/z
+free) and the *clamp* is turned rigidly by end_angle_deg against the P_T
+sense (counter-clockwise) about the paper layer's mid-point at x = 0
+(prescribed displacements).  Pressure, contact and
+the hyperelastic solid are frame-invariant, so this is the end face held at
++end_angle_deg in the clamp's frame, exactly and for any angle, and the couple
+is measured on the end face as in *blocked*.  Rejected alternative: tying the
+end face's x-dofs with offsets tan(theta) (Y - Y_ref) or sin(theta) (Y - Y_ref)
+with y free holds the face only approximately (its y-stretch changes the
+actual inclination) and degenerates as the face approaches 90 deg, which the
+2D unit reaches (about 87 deg total free at 300 kPa).  Caveat: the prescribed
+displacement ramps linearly with the load factor, so an intermediate state has
+the clamp face turned by atan2(lam sin t, 1 - lam + lam cos t) and shortened
+by up to cos(t/2); only the final state (lam = 1) is the rotation asked for.
+An applied end moment was not used: a couple on a deforming face needs a
+follower load (a dead couple loses its arm as the face turns) and the solve
+is force-controlled near the free angle, where the unit is softest.
+
+``end_hold`` (blocked and rotation) chooses the end nodes held plane:
+``face`` (default, the sweeps' blocked moment) the whole end face, ``backbone``
+only the paper and base layers (|y| <= 2.1 mm), the blocks' end walls being
+as free as in case *free*.  Measured on the 2D unit (h = 1 mm, contact;
+``workflow.unit_moment_check``): ``face`` gives a blocked moment 2.5-3.4 times
+the ``backbone`` one, and under rotation its couple collapses and turns
+negative from about 0.1-0.25 of the free angle (the last bottom block, forced
+to turn with the face, is pressed into its neighbour; beyond about 20 deg
+total the solve stalls), whereas ``backbone`` runs from M_b to about 0 at the
+free angle (within 11 % of M_b of a linear spring).
 """
 
 from __future__ import annotations
@@ -33,7 +66,8 @@ from ._contact import contact_pairs_from_mesh
 from ._mesh import UnitMesh, build_unit_mesh
 from ._solve import DEFAULT_SOLVER, Model, solve_path
 
-__all__ = ["DEFAULT_MATERIAL", "DEFAULT_CONTACT", "material_constants", "UnitResult", "solve_unit", "unit_model"]
+__all__ = ["DEFAULT_MATERIAL", "DEFAULT_CONTACT", "CASES", "END_HOLDS", "material_constants", "UnitResult", "solve_unit",
+           "unit_model", "held_end_nodes", "clamp_rotation", "clamp_inclination_deg"]
 
 #: Table 5 Mooney-Rivlin constants (MPa), bulk modulus ratio K/mu0, paper layer.
 DEFAULT_MATERIAL = {
@@ -71,9 +105,11 @@ class UnitResult:
     """One unit-model solve along the ray p = s (p_top, p_bottom), s in (0, 1].
 
     Angles in degrees (per unit = total / n_chambers), moments in N m for the
-    full actuator width, pressures in kPa, lengths in mm.  ``history`` holds
-    one dict per accepted load step (same keys as the scalars), so a sweep
-    along a ray gets every step as a sample.
+    full actuator width, pressures in kPa, lengths in mm.  ``end_angle_deg``
+    is the held end's total inclination reached (case ``rotation``; 0 for
+    ``blocked``, NaN for ``free``); the bending angles are the backbone's.
+    ``history`` holds one dict per accepted load step (same keys as the
+    scalars), so a sweep along a ray gets every step as a sample.
     """
 
     dim: int
@@ -95,6 +131,7 @@ class UnitResult:
     assembly_time_s: float
     solve_time_s: float
     ndofs: int
+    end_angle_deg: float = 0.0
     history: list = field(default_factory=list)
     displacement: np.ndarray | None = field(default=None, repr=False)
 
@@ -108,19 +145,66 @@ class UnitResult:
         return d
 
 
+CASES = ("free", "blocked", "rotation")
+END_HOLDS = ("face", "backbone")
+
+
+def held_end_nodes(um: UnitMesh, end_hold: str = "face") -> np.ndarray:
+    """Right-end nodes held plane by cases ``blocked``/``rotation``.
+
+    ``face``: the whole end face (the blocks' end walls too).  ``backbone``:
+    only the paper and base layers, |y| <= paper_width/2 + bot_layer (mm), so
+    the blocks' end walls are as free as in case ``free``.
+    """
+    if end_hold not in END_HOLDS:
+        raise ValueError(f"end_hold must be one of {END_HOLDS}, not {end_hold!r}")
+    end = um.nodes["end"]
+    if end_hold == "face":
+        return end
+    g = um.geometry
+    yb = 0.5 * g["paper_width"] + g["bot_layer"]
+    return end[np.abs(um.mesh.p[1, end]) <= yb + 1e-9]
+
+
+def clamp_rotation(um: UnitMesh, angle_deg: float) -> dict:
+    """Prescribed clamp displacements (mm) that turn the x = 0 face rigidly by ``angle_deg``.
+
+    Positive = counter-clockwise in the x-y plane (the opposite sense of P_T
+    bending), about the paper layer's mid-point (0, 0); z is left out (held).
+    Returns ``{dof: value}`` for the clamp's x and y dofs.
+    """
+    t = np.radians(float(angle_deg))
+    dim = um.dim
+    clamp = um.nodes["clamp"]
+    X, Y = um.mesh.p[0, clamp], um.mesh.p[1, clamp]
+    ux = (np.cos(t) - 1.0) * X - np.sin(t) * Y
+    uy = np.sin(t) * X + (np.cos(t) - 1.0) * Y
+    out = {int(dim * n): float(v) for n, v in zip(clamp, ux)}
+    out.update({int(dim * n + 1): float(v) for n, v in zip(clamp, uy)})
+    return out
+
+
 def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", contact: bool = True,
-               material: Mapping | None = None, contact_options: Mapping | None = None, mixed: bool = True) -> Model:
-    """The ``Model`` of the unit (pressures in MPa at load factor 1)."""
-    if case not in ("free", "blocked"):
-        raise ValueError(f"case must be 'free' or 'blocked', not {case!r}")
+               material: Mapping | None = None, contact_options: Mapping | None = None, mixed: bool = True,
+               end_angle_deg: float = 0.0, end_hold: str = "face") -> Model:
+    """The ``Model`` of the unit (pressures in MPa at load factor 1).
+
+    ``end_angle_deg`` (deg, total over the unit, + = P_T sense) is used by
+    case ``rotation`` only (see the module docstring).
+    """
+    if case not in CASES:
+        raise ValueError(f"case must be one of {CASES}, not {case!r}")
     mat = material_constants(material)
     solid = SolidAssembler(um.mesh, um.material, mat, mixed=mixed)
     dim = um.dim
+    # counter-clockwise clamp = the end face turned clockwise (P_T sense) relative to it
+    prescribed = clamp_rotation(um, end_angle_deg) if case == "rotation" else {}
     fixed = [dim * um.nodes["clamp"][:, None] + np.arange(dim)]
     if dim == 3:
         fixed.append(dim * um.nodes["symmetry"] + 2)
     fixed = np.unique(np.concatenate([f.ravel() for f in fixed]))
-    ties = [dim * um.nodes["end"]] if case == "blocked" else []
+    fixed = np.setdiff1d(fixed, np.fromiter(prescribed, dtype=np.int64, count=len(prescribed)))
+    ties = [dim * held_end_nodes(um, end_hold)] if case in ("blocked", "rotation") else []
     pressures = {
         "top": (um.facets["cavity_top"], 1e-3 * float(p_top_kpa)),
         "bottom": (um.facets["cavity_bottom"], 1e-3 * float(p_bottom_kpa)),
@@ -129,23 +213,36 @@ def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = 
     copts.update(dict(contact_options or {}))
     pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["two_pass"], copts["extend"], copts["smoothing_mm"]) if contact else []
     eps = copts["penalty_factor"] * mat["mu0"] / um.h
-    return Model(solid, pressures=pressures, contacts=pairs, penalty=eps, fixed=fixed, ties=ties)
+    return Model(solid, pressures=pressures, contacts=pairs, penalty=eps, fixed=fixed, prescribed=prescribed, ties=ties)
 
 
-def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_bottom_kpa: float):
+def clamp_inclination_deg(end_angle_deg: float, lam: float) -> float:
+    """Inclination (deg) of the clamp face at load factor ``lam`` when lam = 1 turns it by ``end_angle_deg``.
+
+    The prescribed displacement is linear in lam, so the face (a straight
+    line) is turned by atan2(lam sin t, 1 - lam + lam cos t), not lam t.
+    """
+    t = np.radians(float(end_angle_deg))
+    return float(np.degrees(np.arctan2(lam * np.sin(t), 1.0 - lam + lam * np.cos(t))))
+
+
+def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_bottom_kpa: float,
+                     end_angle_deg: float = 0.0, end_hold: str = "face"):
     p_ref = um.mesh.p
     dim = um.dim
     n = int(um.geometry["n_chambers"])
     width_factor = um.geometry["width"] if dim == 2 else 2.0
-    end = um.nodes["end"]
+    end = held_end_nodes(um, end_hold)
 
     def measure(u, lam, info):
         x = model.positions(u, p_ref)
         a = x[:, um.nodes["backbone_end"]].mean(axis=1)
         b = x[:, um.nodes["backbone_prev"]].mean(axis=1)
-        total = -np.degrees(np.arctan2(a[1] - b[1], a[0] - b[0]))
+        # the clamp of case rotation is turned by -end_angle: angles are relative to it
+        end_angle = clamp_inclination_deg(end_angle_deg, lam) if case == "rotation" else (0.0 if case == "blocked" else np.nan)
+        total = -np.degrees(np.arctan2(a[1] - b[1], a[0] - b[0])) + (end_angle if case == "rotation" else 0.0)
         moment = np.nan
-        if case == "blocked" and info.get("r") is not None:
+        if case in ("blocked", "rotation") and info.get("r") is not None:
             r = info["r"].reshape(-1, dim)[end]
             xe = x[:, end]
             c = xe.mean(axis=1)
@@ -158,6 +255,7 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
             "bending_angle_total_deg": float(total),
             "bending_angle_deg": float(total / n),
             "bending_moment_nm": moment,
+            "end_angle_deg": end_angle,
             "max_penetration_mm": float(max(0.0, -gmin)) if np.isfinite(gmin) else 0.0,
         }
 
@@ -167,7 +265,7 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
 def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", contact: bool = True, *,
                material: Mapping | None = None, contact_options: Mapping | None = None,
                solver: Mapping | None = None, mixed: bool = True, keep_displacement: bool = False,
-               stops=()) -> UnitResult:
+               stops=(), end_angle_deg: float = 0.0, end_hold: str = "face") -> UnitResult:
     """Solve the unit model from zero to (p_top_kpa, p_bottom_kpa) and measure it.
 
     Parameters
@@ -177,8 +275,10 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
         optional ``geometry`` and ``paper_layers``.
     p_top_kpa, p_bottom_kpa : float
         Top and bottom chamber pressures at the end of the ray, kPa.
-    case : {"free", "blocked"}
-        Free bending (angle) or rotation held at the right end (moment).
+    case : {"free", "blocked", "rotation"}
+        Free bending (angle), rotation held at zero at the right end (moment)
+        or held at ``end_angle_deg`` (moment; only the final state, lam = 1,
+        is that rotation: see the module docstring).
     contact : bool
         Penalty self-contact across the gaps.
     material, contact_options, solver : mapping, optional
@@ -190,6 +290,12 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
     stops : sequence of float
         Fractions s in (0, 1] of the ray that the load steps must hit exactly
         (e.g. 60/300 and 180/300), so that ``history`` has samples there.
+    end_angle_deg : float
+        Case ``rotation``: total inclination of the right end face relative to
+        the clamp, deg, positive in the sense of P_T bending.
+    end_hold : {"face", "backbone"}
+        Cases ``blocked``/``rotation``: hold the whole end face plane or only
+        its paper and base layers (see `held_end_nodes`).
 
     Returns
     -------
@@ -202,14 +308,14 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
     else:
         prm = dict(mesh_or_params)
         um = build_unit_mesh(prm.get("geometry"), h=prm["h"], dim=prm["dim"], paper_layers=prm.get("paper_layers", 1))
-    model = unit_model(um, p_top_kpa, p_bottom_kpa, case, contact, material, contact_options, mixed)
-    measure = _measure_factory(um, model, case, p_top_kpa, p_bottom_kpa)
+    model = unit_model(um, p_top_kpa, p_bottom_kpa, case, contact, material, contact_options, mixed, end_angle_deg, end_hold)
+    measure = _measure_factory(um, model, case, p_top_kpa, p_bottom_kpa, end_angle_deg, end_hold)
     opts = dict(DEFAULT_SOLVER)
     opts.update(dict(solver or {}))
     res = solve_path(model, um.mesh.p, opts, measure, stops=tuple(stops))
     last = res.history[-1] if res.history else {
         "bending_angle_total_deg": 0.0, "bending_angle_deg": 0.0, "bending_moment_nm": 0.0 if case == "blocked" else np.nan,
-        "max_penetration_mm": 0.0}
+        "end_angle_deg": 0.0 if case == "blocked" else np.nan, "max_penetration_mm": 0.0}
     pen = max([h["max_penetration_mm"] for h in res.history], default=0.0)
     return UnitResult(
         dim=um.dim, case=case, contact=bool(contact), p_top_kpa=float(p_top_kpa), p_bottom_kpa=float(p_bottom_kpa),
@@ -218,5 +324,6 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
         bending_moment_nm=last["bending_moment_nm"], max_penetration_mm=pen,
         newton_iterations=res.iterations, steps=res.steps, cutbacks=res.cutbacks,
         wall_time_s=time.perf_counter() - t0, assembly_time_s=res.timing["assembly_s"], solve_time_s=res.timing["solve_s"],
-        ndofs=model.n, history=res.history, displacement=res.u if keep_displacement else None,
+        ndofs=model.n, end_angle_deg=last["end_angle_deg"], history=res.history,
+        displacement=res.u if keep_displacement else None,
     )
