@@ -33,6 +33,7 @@ def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bott
     """
     contact = dict(actuator.get("contact", {}))
     enabled = contact.pop("enabled", True)
+    kwargs.setdefault("end_hold", actuator.get("end_hold", "backbone"))
     return solve_unit(
         mesh if mesh is not None else unit_mesh_from_config(actuator, dim),
         p_top_kpa, p_bottom_kpa, case, enabled,
