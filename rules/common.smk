@@ -52,6 +52,8 @@ def get_final_output():
     out += expand("results/actuator/response_{fea}.nc", fea=["2d", "3d"])
     out += expand("results/actuator/surrogate_{fea}.joblib", fea=["2d", "3d"])
     out += ["results/actuator/surrogate_cv.nc", "results/actuator/mapping_2d3d.nc"]
+    # The unit under an external end moment: FEA at prescribed end rotations vs the unit model.
+    out += ["results/actuator/unit_moment_check.nc"]
     # Cascade plans per patient and their validation against Tables 8 and 10 (issue 6).
     out += expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS)
     out += ["results/validation/cascade.nc"]
