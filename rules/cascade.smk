@@ -5,10 +5,12 @@
 rule cascade_plan:
     input:
         unit_response=get_unit_response(),
+        # the sweep behind the surrogate: planned pressures outside its converged samples are flagged
+        response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         joint_loads="results/patients/{patient}/joint_loads.nc",
-        code=code_files("cascade", "finger", "plots_cascade", "unit_model", "surrogates"),
+        code=code_files("cascade", "finger", "plots_cascade", "unit_model", "surrogates", "stability"),
     output:
         plan="results/patients/{patient}/cascade_plan.nc",
         plot=report(

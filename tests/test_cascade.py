@@ -223,7 +223,7 @@ def test_plan_dataset_roundtrip_and_validation(tmp_path):
     assert not bool(val["paper_reached"].sel(paper_set="fea_2d", exercise="TGE4"))
 
 
-def test_write_cascade_plan_from_stage_files(tmp_path):
+def test_write_cascade_plan_from_stage_files(tmp_path, caplog):
     """The rule's entry point on minimal upstream files (contract layouts)."""
     import xarray as xr
 
@@ -263,13 +263,22 @@ def test_write_cascade_plan_from_stage_files(tmp_path):
          "active_limit_nm": ("joint", list(LIMITS))},
         coords={"exercise": ex, "joint": joints, "dimension": ["depth", "length", "breadth"]},
     ).to_netcdf(tmp_path / "loads.nc")
-    ds = C.write_cascade_plan("p", {"finger": "F3"}, LinearUnit(), out_nc=tmp_path / "plan.nc",
-                              out_png=tmp_path / "poses.png", **kw)
+    # a surrogate sampled only up to 100 kPa: planned pairs beyond it are flagged and logged (issue 7 item 2)
+    from workflow.stability import SampledRegion
+
+    region = SampledRegion(np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0], [100.0, 100.0]]), np.empty((0, 2)))
+    with caplog.at_level("WARNING", logger="workflow.cascade"):
+        ds = C.write_cascade_plan("p", {"finger": "F3"}, LinearUnit(), out_nc=tmp_path / "plan.nc",
+                                  out_png=tmp_path / "poses.png", sampled_region=region, **kw)
     back = xr.load_dataset(tmp_path / "plan.nc")
     assert back.attrs["rule"] == "cascade_plan" and "config_sha256" in back.attrs
     assert (tmp_path / "poses.png").stat().st_size > 10_000
     assert bool(ds["achieved"].sel(exercise="TGE1")) and not bool(ds["achieved"].sel(exercise="TGE2"))
     assert list(ds["units_per_group"].values) == [5, 6, 4, 4]
+    p = back["pressure_kpa"]
+    outside = (p.max("chamber") > 100.0).values
+    assert outside.any() and np.array_equal(~back["pressure_in_sampled_region"].values, outside)
+    assert sum("outside the sampled region" in r.getMessage() for r in caplog.records) == int(outside.sum())
 
 
 def test_untying_cmc_from_mcp_never_needs_more_pressure():

@@ -739,11 +739,15 @@ def write_cascade_plan(
     anthropometry: Mapping[str, Any],
     config_slice: Any,
     rule: str = "cascade_plan",
+    sampled_region: Any = None,
 ):
     """Build the patient's finger and actuator, plan every exercise, write the plan (and poses plot).
 
     ``unit`` is the unit response object (see :class:`UnitResponse`);
-    ``cascade_cfg`` the config's ``cascade`` section.
+    ``cascade_cfg`` the config's ``cascade`` section.  ``sampled_region`` (a
+    `workflow.stability.SampledRegion` of the surrogate's sweep), if given,
+    flags planned (P_T, P_B) pairs outside the converged FE samples or nearest
+    a failed one: ``pressure_in_sampled_region`` and a warning in the log.
     """
     import logging
     import time
@@ -781,6 +785,14 @@ def write_cascade_plan(
     ds = plans_dataset(model, plans, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
                        notes={"patient": patient_name, "finger": finger_name, "springs": spring_note,
                               "planning_wall_time_s": round(time.perf_counter() - t0, 3)})
+    if sampled_region is not None:
+        # the surrogate is an extrapolation outside its samples (issue 7 item 2): flag, do not stop
+        from workflow.stability import flag_pressure_table
+
+        ds["pressure_in_sampled_region"], msgs = flag_pressure_table(ds["pressure_kpa"], sampled_region,
+                                                                     label=f"patient {patient_name}: ")
+        for m in msgs:
+            log.warning(m)
     write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
                   title=f"Cascade pressure plan of patient {patient_name}")
     if out_png:

@@ -1,0 +1,76 @@
+# Stage report (issue 7 item 4): what `snakemake --report report.html` shows
+# beyond the stages' own plots -- the moment-angle curves and the tables (one
+# small HTML page each, shown inline). Science-free: workflow/report_tables.py
+# and workflow/plots_report.py only reformat datasets.
+
+
+rule moment_angle_plot:
+    input:
+        moments="results/musculoskeletal/moments.nc",
+        code=code_files("plots_report"),
+    output:
+        report("results/musculoskeletal/moment_angle.png", caption="../report/moment_angle.rst",
+               category="Musculoskeletal"),
+    log:
+        "logs/report/moment_angle_plot.log",
+    benchmark:
+        "results/benchmarks/rules/moment_angle_plot.tsv"
+    script:
+        "../workflow/scripts/moment_angle_plot.py"
+
+
+rule report_table:
+    input:
+        dataset=lambda wc: {
+            "scaling": "results/validation/scaling.nc",
+            "musculoskeletal": "results/validation/musculoskeletal.nc",
+            "unit_check": "results/actuator/unit_check.nc",
+            "surrogate_cv": "results/actuator/surrogate_cv.nc",
+            "mapping": "results/actuator/mapping_2d3d.nc",
+            "cascade_validation": "results/validation/cascade.nc",
+        }[wc.table],
+        code=code_files("report_tables"),
+    output:
+        report("results/report/{table}.html", caption="../report/tables.rst", category="Tables"),
+    wildcard_constraints:
+        table="scaling|musculoskeletal|unit_check|surrogate_cv|mapping|cascade_validation",
+    log:
+        "logs/report/report_table_{table}.log",
+    benchmark:
+        "results/benchmarks/rules/report_table_{table}.tsv"
+    script:
+        "../workflow/scripts/report_table.py"
+
+
+rule joint_loads_table:
+    input:
+        dataset="results/patients/{patient}/joint_loads.nc",
+        code=code_files("report_tables"),
+    output:
+        report("results/patients/{patient}/joint_loads.html", caption="../report/tables.rst",
+               category="Patients", subcategory="{patient}"),
+    params:
+        table="joint_loads",
+    log:
+        "logs/report/joint_loads_table_{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/joint_loads_table_{patient}.tsv"
+    script:
+        "../workflow/scripts/report_table.py"
+
+
+rule cascade_plan_table:
+    input:
+        dataset="results/patients/{patient}/cascade_plan.nc",
+        code=code_files("report_tables"),
+    output:
+        report("results/patients/{patient}/cascade_plan.html", caption="../report/tables.rst",
+               category="Cascade", subcategory="{patient}"),
+    params:
+        table="cascade_plan",
+    log:
+        "logs/report/cascade_plan_table_{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/cascade_plan_table_{patient}.tsv"
+    script:
+        "../workflow/scripts/report_table.py"

@@ -1,0 +1,84 @@
+# Stage stability (issue 7 item 2): where each method fails or degrades. Two
+# small FE studies of the 2D unit (extra rays by mesh, contact and formulation;
+# locking against K/mu0) and the maps built from the sweeps, the unit check,
+# the surrogates' sampled region, the patients' coded levels and their plans.
+# Science in workflow/stability.py, figures in workflow/plots_stability.py.
+
+
+rule stability_rays:
+    input:
+        code=code_files("stability", "stability_run", "sweep", "fem"),
+    output:
+        "results/stability/rays_2d.nc",
+    params:
+        rays=config["stability"]["rays"],
+        # only the parts of the unit model the rays use (not its sweep or check settings)
+        actuator={k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "mesh", "contact", "solver")},
+        config_slice={"stability": {"rays": config["stability"]["rays"]},
+                      "actuator": {k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "mesh", "contact", "solver")}},
+    log:
+        "logs/stability/stability_rays.log",
+    benchmark:
+        "results/benchmarks/rules/stability_rays.tsv"
+    script:
+        "../workflow/scripts/stability_rays.py"
+
+
+rule stability_locking:
+    input:
+        code=code_files("stability", "stability_run", "sweep", "fem"),
+    output:
+        "results/stability/locking.nc",
+    params:
+        locking=config["stability"]["locking"],
+        actuator={k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")},
+        config_slice={"stability": {"locking": config["stability"]["locking"]},
+                      "actuator": {k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")}},
+    log:
+        "logs/stability/stability_locking.log",
+    benchmark:
+        "results/benchmarks/rules/stability_locking.tsv"
+    script:
+        "../workflow/scripts/stability_locking.py"
+
+
+rule stability_maps:
+    input:
+        response_2d="results/actuator/response_2d.nc",
+        response_3d="results/actuator/response_3d.nc",
+        unit_check="results/actuator/unit_check.nc",
+        rays="results/stability/rays_2d.nc",
+        locking="results/stability/locking.nc",
+        ccd="results/doe/ccd.nc",
+        loads=expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS),
+        plans=expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS),
+        code=code_files("stability", "stability_run", "plots_stability", "sweep"),
+    output:
+        nc="results/stability/stability.nc",
+        failures=report("results/stability/newton_failures.png", caption="../report/stability_failures.rst",
+                        category="Stability maps"),
+        locking=report("results/stability/locking.png", caption="../report/stability_locking.rst",
+                       category="Stability maps"),
+        penetration=report("results/stability/penetration.png", caption="../report/stability_penetration.rst",
+                           category="Stability maps"),
+        coverage=report("results/stability/surrogate_coverage.png", caption="../report/stability_coverage.rst",
+                        category="Stability maps"),
+        design=report("results/stability/design_feasibility.png", caption="../report/stability_design.rst",
+                      category="Stability maps"),
+        table=report("results/stability/summary.html", caption="../report/stability_summary.rst",
+                     category="Stability maps"),
+    params:
+        patients=PATIENTS,
+        # the sweeps' and unit check's element sizes and contact switch (labels of the maps)
+        actuator={"mesh": config["actuator"]["mesh"], "contact": config["actuator"]["contact"]},
+        stability=config["stability"],
+        cascade_surrogate=config["cascade"]["surrogate"],
+        config_slice={"stability": config["stability"],
+                      "actuator": {"mesh": config["actuator"]["mesh"], "contact": config["actuator"]["contact"]},
+                      "cascade": {"surrogate": config["cascade"]["surrogate"]}, "patients": PATIENTS},
+    log:
+        "logs/stability/stability_maps.log",
+    benchmark:
+        "results/benchmarks/rules/stability_maps.tsv"
+    script:
+        "../workflow/scripts/stability_maps.py"
