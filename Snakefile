@@ -22,6 +22,8 @@ include: "rules/actuator.smk"
 include: "rules/surrogates.smk"
 include: "rules/cascade.smk"
 include: "rules/fea_check.smk"
+include: "rules/stability.smk"
+include: "rules/report.smk"
 
 
 rule all:

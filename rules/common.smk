@@ -57,6 +57,11 @@ def get_final_output():
     # Cascade plans per patient and their validation against Tables 8 and 10 (issue 6).
     out += expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS)
     out += ["results/validation/cascade.nc"]
+    # Stability maps and the report's plots and tables (issue 7).
+    out += ["results/stability/stability.nc", "results/musculoskeletal/moment_angle.png"]
+    out += expand("results/report/{table}.html", table=["scaling", "musculoskeletal", "unit_check", "surrogate_cv",
+                                                       "mapping", "cascade_validation"])
+    out += expand("results/patients/{patient}/{table}.html", patient=PATIENTS, table=["joint_loads", "cascade_plan"])
     return out
 
 
