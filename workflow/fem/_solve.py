@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from . import _linsolve
 from ._assembly import Pattern, SolidAssembler, vector_dofs
 from ._pressure import pressure_load
 
@@ -45,19 +46,10 @@ DEFAULT_SOLVER = {
     "line_search": True,  # Matthies-Strang line search on the Newton correction
 }
 
-try:  # MKL PARDISO when it installs (x86_64 wheels); SuperLU otherwise
-    import pypardiso as _pypardiso
-except ImportError:  # pragma: no cover - depends on the platform
-    _pypardiso = None
-
 
 def linear_solve(A: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
-    """Sparse direct solve with pypardiso when importable, else SciPy's SuperLU."""
-    if _pypardiso is not None:
-        return _pypardiso.spsolve(sp.csr_matrix(A), b)
-    import scipy.sparse.linalg as spla
-
-    return spla.spsolve(sp.csc_matrix(A), b)
+    """Sparse direct solve: PARDISO (analysis kept while the pattern stays) when importable, else SuperLU."""
+    return _linsolve.default_solver.solve(A, b)
 
 
 class Model:
@@ -263,7 +255,7 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
             r0 = max(norm, 1e-300)
         elif norm > 1e6 * r0:
             return False, u, it, "diverged", info
-        Kr = (T.T @ K @ T).tocsr()
+        Kr = _linsolve.reduce_matrix(K, T)
         t0 = time.perf_counter()
         try:
             dv = linear_solve(Kr, -rr)

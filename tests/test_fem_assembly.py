@@ -1,0 +1,134 @@
+"""The batched-matmul element assembly against central finite differences (issue 4 item 9).
+
+On small deformed 2D and 3D meshes with silicone (Mooney-Rivlin, id 0), paper
+(neo-Hooke, id 1) and a further neo-Hooke id, for the mean-dilatation and the
+plain displacement element: every column of the assembled tangent equals the
+central difference of the residual, and the residual the central difference
+of the energy.
+"""
+
+import numpy as np
+import pytest
+
+from workflow import fem
+from workflow.fem import _assembly
+
+EPS = 1e-6
+MAT = dict(fem.material_constants({}), neo_hooke={2: (0.5, 20.0)})  # MPa
+
+
+def _deformed_mesh(dim, seed=0):
+    """A 3x2 quad / 2x2x1 hex block with ids 0, 1, 2 and a smooth plus random displacement (mm)."""
+    coords = [np.linspace(0.0, 2.0, 4), np.linspace(0.0, 1.0, 3)] if dim == 2 else \
+        [np.linspace(0.0, 2.0, 3), np.linspace(0.0, 1.0, 3), np.linspace(0.0, 1.0, 2)]
+    mesh, _, _ = fem.build_grid_mesh(coords)
+    material = np.arange(mesh.t.shape[1]) % 3
+    p = mesh.p
+    rng = np.random.default_rng(seed)
+    u = 0.15 * np.sin(p[0])[None] * np.linspace(1.0, 0.5, dim)[:, None] + 0.03 * rng.standard_normal(p.shape)
+    return mesh, material, u.T.ravel()
+
+
+def _tangent_error(solid, u):
+    """max |K - K_fd| / max |K| over the full matrix."""
+    f, k, jmin = solid.assemble(u)
+    assert jmin > 0.5
+    K = _assembly.Pattern(solid.rows, solid.cols, solid.ndofs).matrix(k).toarray()
+    K_fd = np.empty_like(K)
+    for j in range(solid.ndofs):
+        e = np.zeros(solid.ndofs)
+        e[j] = EPS
+        K_fd[:, j] = (solid.assemble(u + e, False)[0] - solid.assemble(u - e, False)[0]) / (2 * EPS)
+    return np.abs(K - K_fd).max() / np.abs(K).max()
+
+
+@pytest.mark.parametrize("mixed", [True, False])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_tangent_matches_finite_differences(dim, mixed):
+    mesh, material, u = _deformed_mesh(dim)
+    solid = fem.SolidAssembler(mesh, material, MAT, mixed=mixed)
+    assert _tangent_error(solid, u) < 1e-6
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_check_detects_a_missing_tangent_term(dim, monkeypatch):
+    # drop the second half of p d2J (the c_ak c_bi term): the check above must see it
+    mesh, material, u = _deformed_mesh(dim)
+    solid = fem.SolidAssembler(mesh, material, MAT)
+    monkeypatch.setattr(_assembly, "_swap_ik", lambda M, nbf, d: 0.0 * M)
+    assert _tangent_error(solid, u) > 1e-3
+
+
+@pytest.mark.parametrize("mixed", [True, False])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_residual_is_energy_gradient(dim, mixed):
+    mesh, material, u = _deformed_mesh(dim, seed=1)
+    solid = fem.SolidAssembler(mesh, material, MAT, mixed=mixed)
+    f, _, _ = solid.assemble(u, False)
+    du = EPS * np.random.default_rng(2).standard_normal(u.size)
+    dE = (solid.energy(u + du) - solid.energy(u - du)) / 2
+    assert dE == pytest.approx(f @ du, rel=1e-6)
+
+
+def test_unknown_material_id_is_an_error():
+    mesh, material, _ = _deformed_mesh(2)
+    with pytest.raises(ValueError, match="material ids"):
+        fem.SolidAssembler(mesh, material, fem.material_constants({}))
+
+
+def _random_system(n, seed, density=0.05):
+    """A sparse, diagonally dominant nonsymmetric matrix (CSR) and a right-hand side."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=density, random_state=rng) + sp.eye(n) * n * density * 2
+    return sp.csr_matrix(A), rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("backend", ["pardiso", "superlu"])
+def test_direct_solver_reuses_analysis_while_the_pattern_fits(backend):
+    from workflow.fem import _linsolve
+
+    solver = _linsolve.DirectSolver()
+    if backend == "superlu":
+        solver._pardiso = None
+    elif solver._pardiso is None:
+        pytest.skip("pypardiso not installed")
+    A, b = _random_system(200, 0)
+    sub = A.tolil()
+    sub[0, 1:] = 0.0  # a pattern inside the analysed one
+    B, c = _random_system(200, 1)  # a different pattern
+    for M, rhs in ((A, b), (1.5 * A, b), (sub.tocsr(), b), (B, c)):
+        M = M.tocsr()
+        M.eliminate_zeros()
+        x = solver.solve(M, rhs)
+        assert np.linalg.norm(M @ x - rhs) < 1e-10 * np.linalg.norm(rhs)
+    if backend == "pardiso":
+        assert solver.stats["analyses"] == 2 and solver.stats["factorisations"] == 4
+
+
+def test_reduce_matrix_is_the_constraint_product():
+    import scipy.sparse as sp
+
+    from workflow.fem import _linsolve
+
+    K, _ = _random_system(30, 2, density=0.2)
+    # dofs 0 and 5 fixed, 7 / 8 / 9 tied to one unknown, the rest free
+    col = np.full(30, -1)
+    free = [i for i in range(30) if i not in (0, 5, 7, 8, 9)]
+    col[free] = np.arange(len(free))
+    col[[7, 8, 9]] = len(free)
+    rows = np.flatnonzero(col >= 0)
+    T = sp.csr_matrix((np.ones(rows.size), (rows, col[rows])), shape=(30, len(free) + 1))
+    np.testing.assert_allclose(_linsolve.reduce_matrix(K, T).toarray(), (T.T @ K @ T).toarray(), rtol=1e-14, atol=1e-12)
+
+
+def test_threads_give_the_same_assembly():
+    um = fem.build_unit_mesh(h=2.0, dim=3)
+    u = 0.01 * np.random.default_rng(3).standard_normal(3 * um.mesh.p.shape[1])
+    mat = fem.material_constants({})
+    one = fem.SolidAssembler(um.mesh, um.material, mat, threads=1, chunk_points=512).assemble(u)
+    two = fem.SolidAssembler(um.mesh, um.material, mat, threads=2, chunk_points=512).assemble(u)
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+    assert one[2] == two[2]
