@@ -137,11 +137,15 @@ class ContactPair:
     smooth_normals : bool
         2D only: interpolate the master normal between nodal normals (continuous
         across master nodes); False = each facet's own normal (kinks at nodes).
+    penalty_factor : float
+        This pair's penalty is ``penalty_factor`` times the eps passed to
+        ``evaluate`` (the model's), e.g. a softer contact with flesh.
     """
 
     def __init__(self, p: np.ndarray, slave_facets: np.ndarray, master_facets: np.ndarray, search: float = 1.0,
-                 extend: float = 0.5, smoothing: float = 0.0, smooth_normals: bool = True):
+                 extend: float = 0.5, smoothing: float = 0.0, smooth_normals: bool = True, penalty_factor: float = 1.0):
         self.dim = p.shape[0]
+        self.penalty_factor = float(penalty_factor)
         self.smoothing = float(smoothing)
         self.smooth_normals = bool(smooth_normals)
         slaves = slave_facets if isinstance(slave_facets, (list, tuple)) else [slave_facets]
@@ -326,7 +330,7 @@ class ContactPair:
             nodes = np.concatenate([self.slave[act, None], self.master[ma]], axis=1)
             lim = (self.lim[ma],)
         X = x[:, nodes].transpose(1, 2, 0)  # (nc, nn, dim)
-        w = eps * self.area[act]
+        w = eps * self.penalty_factor * self.area[act]
         f = self._local_force(X, w, lim)
         dofs = (dim * nodes[:, :, None] + np.arange(dim)).reshape(nodes.shape[0], -1)
         K = None
@@ -345,7 +349,7 @@ class ContactPair:
     def energy(self, x: np.ndarray, eps: float) -> float:
         _, _, _, g, inside = self._project(x)
         ok = inside & (np.abs(g) <= self.search) & (g < 0)
-        return float(np.sum(0.5 * eps * self.area[ok] * g[ok] ** 2))
+        return float(np.sum(0.5 * eps * self.penalty_factor * self.area[ok] * g[ok] ** 2))
 
 
 def contact_pairs_from_mesh(unit_mesh, search: float = 1.0, two_pass: bool = True, extend: float = 0.5,

@@ -71,11 +71,21 @@ class Model:
     extras : list of objects with ``evaluate(x, u, lam, tangent) -> (f (n,), K (n, n) sparse or None)``
         Further internal-force terms added to the residual (springs, hinges,
         straps, dead loads as negative forces); ``x`` are the current node
-        positions (dim, nnodes).
+        positions (dim, nnodes).  An extra may also have ``external(x, u, lam)
+        -> f (n,)``: the part of its force that is an applied load (a dead
+        load), counted in the convergence reference like the pressures.
+        Without it, the extra's force enters the reference by its norm (a
+        spring's force is a reaction-like internal force of the same scale).
+    updaters : list of objects with ``increment(p_ref, u, du) -> du'``
+        Map a Newton correction (or a predictor) to the increment actually
+        applied: equal to du to first order, e.g. the finite rotation of a
+        nearly rigid body instead of its linearisation (see
+        ``_finger2d.RigidRotationUpdate``).  Applied in order; the converged
+        solution does not depend on them, only the path of the iterations.
     """
 
     def __init__(self, solid: SolidAssembler, pressures=None, contacts=(), penalty=0.0, fixed=(), prescribed=None, ties=(),
-                 offsets=None, extras=()):
+                 offsets=None, extras=(), updaters=()):
         self.solid = solid
         self.p0 = solid.mesh_p if hasattr(solid, "mesh_p") else None
         self.pressures = dict(pressures or {})
@@ -91,6 +101,7 @@ class Model:
         for dof, val in offsets.items():
             self.uD[dof] = val
         self.extras = list(extras)
+        self.updaters = list(updaters)
         blocked = np.zeros(n, bool)
         blocked[np.asarray(list(fixed), dtype=int)] = True
         blocked[np.asarray(list(prescribed), dtype=int)] = True
@@ -126,6 +137,12 @@ class Model:
         self.pattern = Pattern(np.concatenate(r_list), np.concatenate(c_list), n)
         self.timing = {"assembly_s": 0.0, "solve_s": 0.0}
 
+    def increment(self, u: np.ndarray, du: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
+        """u advanced by the correction du (through the ``updaters``; u + du without them)."""
+        for upd in self.updaters:
+            du = upd.increment(p_ref, u, du)
+        return u + du
+
     def positions(self, u: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
         return p_ref + u.reshape(-1, self.solid.dim).T
 
@@ -149,9 +166,12 @@ class Model:
                 vals.append(Ke.ravel())
         r = f_int - f_ext
         K = self.pattern.matrix(np.concatenate(vals)) if tangent else None
+        f_ref2 = 0.0  # squared norm of the extras' loads for the convergence reference
         for extra in self.extras:
             fx, Kx = extra.evaluate(x, u, lam, tangent)
             r = r + fx
+            fe = extra.external(x, u, lam) if hasattr(extra, "external") else fx
+            f_ref2 += float(fe @ fe)
             if tangent and Kx is not None:
                 K = K + sp.csr_matrix(Kx)
         if self.contacts and self.penalty > 0:
@@ -168,7 +188,7 @@ class Model:
                         cv.append(Kc.ravel())
             if tangent and cr:
                 K = K + sp.csr_matrix((np.concatenate(cv), (np.concatenate(cr), np.concatenate(cc))), shape=(self.n, self.n))
-        info["f_ext_norm"] = float(np.linalg.norm(f_ext))
+        info["f_ext_norm"] = float(np.sqrt(f_ext @ f_ext + f_ref2))
         info["r"] = r
         self.timing["assembly_s"] += time.perf_counter() - t0
         return r, K, info
@@ -205,7 +225,7 @@ def _line_search(model: Model, u: np.ndarray, du: np.ndarray, rr: np.ndarray, la
     if not s0 < 0:
         return du
     a_lo, s_lo, a_hi = 0.0, s0, 1.0
-    r1, _, _ = model.evaluate(u + du, lam, p_ref, tangent=False)
+    r1, _, _ = model.evaluate(model.increment(u, du, p_ref), lam, p_ref, tangent=False)
     if r1 is None:
         s_hi = np.inf
     else:
@@ -221,7 +241,7 @@ def _line_search(model: Model, u: np.ndarray, du: np.ndarray, rr: np.ndarray, la
                 return du * a_hi
             a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
             a = min(max(a, a_lo + 0.1 * (a_hi - a_lo)), a_lo + 0.9 * (a_hi - a_lo))
-        ra, _, _ = model.evaluate(u + a * du, lam, p_ref, tangent=False)
+        ra, _, _ = model.evaluate(model.increment(u, a * du, p_ref), lam, p_ref, tangent=False)
         sa = np.inf if ra is None else float((T.T @ ra) @ (T.T @ du))
         if np.isfinite(sa) and abs(sa) <= ratio * abs(s0):
             return a * du
@@ -268,7 +288,7 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
         du = T @ dv
         if opts["line_search"]:
             du = _line_search(model, u, du, rr, lam, p_ref)
-        u = u + du
+        u = model.increment(u, du, p_ref)
     return False, u, opts["max_iter"], "no convergence", info
 
 
