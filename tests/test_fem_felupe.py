@@ -34,7 +34,10 @@ def _smoothstep(t):
 
 
 def _penalty(f, d):
-    """C2 penalty energy density (mm^2) and its derivative: (d - f)^3 / (3 d) for 0 < f < d, d^2/3 - d f + f^2 below 0."""
+    """C2 penalty energy density (mm^2) and its derivative.
+
+    (d - f)^3 / (3 d) for 0 < f < d, d^2/3 - d f + f^2 in penetration (f <= 0), 0 beyond d.
+    """
     val = np.where(f.real >= d, 0.0, np.where(f.real > 0, (d - f) ** 3 / (3.0 * d), d * d / 3.0 - d * f + f * f))
     der = np.where(f.real >= d, 0.0, np.where(f.real > 0, -((d - f) ** 2) / d, 2.0 * f - d))
     return val, der
@@ -234,7 +237,8 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, penalty_factor=100
 def _our_angles(um, p, contact):
     res = fem.solve_unit(um, float(p[-1]), 0.0, "free", contact=contact, stops=tuple(p / p[-1]))
     assert res.status == 0, res.reason
-    return np.array([next(h["bending_angle_total_deg"] for h in res.history if abs(h["p_top_kpa"] - q) < 1e-6) for q in p])
+    at = {round(h["p_top_kpa"], 6): h["bending_angle_total_deg"] for h in res.history}
+    return np.array([at[round(q, 6)] for q in p])
 
 
 def test_free_angle_agrees_with_felupe_without_contact():

@@ -237,7 +237,8 @@ class ContactPair:
     def _project_2d(self, x: np.ndarray, xs: np.ndarray):
         """2D: closest master facet per slave among the 3 nearest by straight clipped distance."""
         ns = xs.shape[0]
-        xa0, xb0 = x[:, self.master[self._pool, 0]].transpose(1, 2, 0), x[:, self.master[self._pool, 1]].transpose(1, 2, 0)
+        xa0 = x[:, self.master[self._pool, 0]].transpose(1, 2, 0)  # (ns, width, 2)
+        xb0 = x[:, self.master[self._pool, 1]].transpose(1, 2, 0)
         t0 = xb0 - xa0
         d = xs[:, None, :] - xa0
         c = np.clip(np.einsum("smi,smi->sm", d, t0) / np.einsum("smi,smi->sm", t0, t0), 0.0, 1.0)
