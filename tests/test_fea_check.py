@@ -174,3 +174,39 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     assert np.all(res.joint_angles_deg > 0)  # the finger droops (flexes) under its weight
     weight = abs(float(np.sum(fea.setup.gravity[1::2])))
     assert abs(res.slide_force) < 1e-3 * weight  # the regularising spring carries next to nothing
+
+
+def test_rigid_rotation_update_is_exact_for_rotations_and_first_order_otherwise():
+    from workflow.fem._finger2d import RigidRotationUpdate
+
+    rng = np.random.default_rng(0)
+    p_ref = rng.uniform(-5, 5, (2, 12))
+    p_ref[:, 0] = 0.0  # pivot of group 0; node 6 the pivot of group 1 (carried by group 0)
+    g0, g1 = np.arange(1, 7), np.arange(7, 12)
+    upd = RigidRotationUpdate([(0, g0, g0), (6, g1, g1)])
+    u = np.zeros(24)
+    th = 0.3
+    J = np.array([[0.0, -1.0], [1.0, 0.0]])
+    du = (th * J @ p_ref).T.ravel()  # linearised rotation of everything about node 0
+    x = p_ref + (u + upd.increment(p_ref, u, du)).reshape(-1, 2).T
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    np.testing.assert_allclose(x, R @ p_ref, atol=1e-12)  # exact finite rotation, no stretch
+    d = rng.normal(size=24)
+    for h in (1e-2, 1e-3):  # the correction is second order in the increment
+        assert np.abs(upd.increment(p_ref, u, h * d) - h * d).max() < 50 * h**2
+
+
+def test_contact_penalty_factor_scales_the_pair():
+    from workflow.fem._contact import ContactPair
+
+    p = np.array([[0.0, 1.0, 0.0, 1.0], [0.0, 0.0, -0.1, -0.1]])
+    slave, master = np.array([[0, 1]]), np.array([[3, 2]])  # upper body's bottom pressed into the lower body's top
+    a = ContactPair(p, slave, master, search=1.0)
+    b = ContactPair(p, slave, master, search=1.0, penalty_factor=0.25)
+    x = p.copy()
+    x[1, :2] -= 0.15
+    _, fa, Ka, _ = a.evaluate(x, 2.0)
+    _, fb, Kb, _ = b.evaluate(x, 2.0)
+    assert np.abs(fa).max() > 0
+    np.testing.assert_allclose(fb, 0.25 * fa)
+    np.testing.assert_allclose(Kb, 0.25 * Ka, atol=1e-9)

@@ -370,31 +370,36 @@ class RigidRotationUpdate:
     the next group along.
     """
 
-    def __init__(self, groups: Sequence[tuple]):
-        # (pivot node, nodes moved with the group, fit nodes[, weight per node]) per group; a node
-        # turns by weight * dtheta (e.g. the actuator between its clamp and the MCP joint)
-        self.groups = []
-        for g in groups:
-            pv, nodes, fit = int(g[0]), np.asarray(g[1], dtype=np.int64), np.asarray(g[2], dtype=np.int64)
-            w = np.ones(nodes.size) if len(g) < 4 else np.asarray(g[3], float)
-            self.groups.append((pv, nodes, fit, w))
+    def __init__(self, groups: Sequence[tuple], blend: tuple | None = None):
+        # (pivot node, nodes moved with the group, fit nodes) per group; ``blend`` = (nodes, W (n, ngroups)):
+        # further nodes whose correction is the W-weighted sum of the groups' corrections at their
+        # position (smooth across the joints, e.g. the actuator on the finger)
+        self.groups = [(int(g[0]), np.asarray(g[1], dtype=np.int64), np.asarray(g[2], dtype=np.int64)) for g in groups]
+        self.blend = None if blend is None else (np.asarray(blend[0], dtype=np.int64), np.asarray(blend[1], float))
+
+    @staticmethod
+    def _corr(th, r):
+        """Exact rotation by th minus its linearisation, applied to r (k, 2); th scalar or (k,)."""
+        c, s = np.cos(th), np.sin(th)
+        return np.stack([(c - 1.0) * r[:, 0] - (s - th) * r[:, 1], (s - th) * r[:, 0] + (c - 1.0) * r[:, 1]], axis=1)
 
     def increment(self, p_ref: np.ndarray, u: np.ndarray, du: np.ndarray) -> np.ndarray:
         out = du.copy()
         U, D, O = u.reshape(-1, 2), du.reshape(-1, 2), out.reshape(-1, 2)
         X = p_ref.T + U
-        for pv, nodes, fit, w in self.groups:
+        parts = []
+        for pv, nodes, fit in self.groups:
             rf = X[fit] - X[pv]
             df = D[fit] - D[pv]
             den = float(np.sum(rf * rf))
-            if den <= 0:
-                continue
-            th = float(np.sum(rf[:, 0] * df[:, 1] - rf[:, 1] * df[:, 0])) / den
-            r = X[nodes] - X[pv]
-            th = th * w
-            c, s = np.cos(th), np.sin(th)
-            # exact rotation minus its linearisation, added to the linear increment
-            corr = np.stack([(c - 1.0) * r[:, 0] - (s - th) * r[:, 1], (s - th) * r[:, 0] + (c - 1.0) * r[:, 1]], axis=1)
-            # the pivot's own correction so far (moved by an earlier group) carries the group
-            O[nodes] = D[nodes] + corr + (O[pv] - D[pv])
+            th = float(np.sum(rf[:, 0] * df[:, 1] - rf[:, 1] * df[:, 0])) / den if den > 0 else 0.0
+            carry = O[pv] - D[pv]  # the pivot's own correction (moved by an earlier group)
+            O[nodes] = D[nodes] + self._corr(th, X[nodes] - X[pv]) + carry
+            parts.append((th, X[pv].copy(), carry.copy()))
+        if self.blend is not None:
+            nodes, W = self.blend
+            acc = np.zeros((nodes.size, 2))
+            for k, (th, xp, carry) in enumerate(parts):
+                acc += W[:, k, None] * (self._corr(th, X[nodes] - xp) + carry)
+            O[nodes] = D[nodes] + acc
         return out
