@@ -93,8 +93,9 @@ class DirectSolver:
         """Positions of A's entries in the analysed pattern, or None if A does not fit in it."""
         if self._pattern is None or self._pattern[1].size != A.shape[0] + 1:
             return None
-        if self._last is not None and np.array_equal(A.indptr, self._last[0]) and np.array_equal(A.indices, self._last[1]):
-            return self._last[2]
+        last = self._last
+        if last is not None and np.array_equal(A.indptr, last[0]) and np.array_equal(A.indices, last[1]):
+            return last[2]
         keys = self._pattern[0]
         akeys = _keys(A)
         pos = np.minimum(np.searchsorted(keys, akeys), keys.size - 1)
