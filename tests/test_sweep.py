@@ -235,7 +235,7 @@ def test_snakemake_resumes_a_missing_shard_and_builds_downstream(tmp_path, repo)
            "--configfile", str(repo / "config" / "config.yaml"), str(tmp_path / "small.yaml"),
            # not mtime: the pre-made shards must not look older than code edited meanwhile
            "--rerun-triggers", "params", "input", "code", "software-env"]
-    run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     mapped = xr.load_dataset(tmp_path / "results/actuator/mapping_2d3d.nc")
     assert mapped.attrs["rule"] == "mapping_2d3d"
