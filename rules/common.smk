@@ -57,6 +57,8 @@ def get_final_output():
     # Cascade plans per patient and their validation against Tables 8 and 10 (issue 6).
     out += expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS)
     out += ["results/validation/cascade.nc"]
+    # The validation patient's plans checked by 2D FEA of the whole actuator on the finger (issue 9).
+    out += [f"results/patients/{config['cascade']['validation_patient']}/fea_check.nc"]
     # Stability maps and the report's plots and tables (issue 7).
     out += ["results/stability/stability.nc", "results/musculoskeletal/moment_angle.png"]
     out += expand("results/report/{table}.html", table=["scaling", "musculoskeletal", "unit_check", "surrogate_cv",
