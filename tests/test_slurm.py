@@ -125,7 +125,8 @@ def test_smoke_workflow_through_slurm(slurm_cluster, tmp_path):
     local = local_overrides(tmp_path)
     cfgs = ["--configfile", "config/smoke.yaml", str(local)]
 
-    dry = run_snakemake(tmp_path, "-n", *cfgs, *SLURM_TARGETS)
+    # targets before --configfile, which takes every following argument as a file
+    dry = run_snakemake(tmp_path, "-n", *SLURM_TARGETS, *cfgs)
     expected = collections.Counter({r: n for r, n in planned_jobs(dry).items() if r != "all"})
     targets = SLURM_TARGETS
     assert expected, "the smoke workflow plans no jobs"
@@ -133,8 +134,8 @@ def test_smoke_workflow_through_slurm(slurm_cluster, tmp_path):
     offset = JOBCOMP.stat().st_size if JOBCOMP.exists() else 0
     log = tmp_path / "snakemake_slurm.log"
     # the README's command; a short first status check only to keep the test quick
-    cmd = [*SNAKEMAKE, "--profile", "profiles/slurm", *cfgs, "--slurm-init-seconds-before-status-checks", "1",
-           *SLURM_TARGETS]
+    cmd = [*SNAKEMAKE, *SLURM_TARGETS, "--profile", "profiles/slurm", *cfgs,
+           "--slurm-init-seconds-before-status-checks", "1"]
     seen: dict[str, dict[str, str]] = {}  # SLURM job id -> its last squeue row
     t0 = time.monotonic()
     with log.open("w") as out:
@@ -167,7 +168,7 @@ def test_smoke_workflow_through_slurm(slurm_cluster, tmp_path):
     # the targets exist and nothing is left to do for them
     missing = [t for t in targets if not (tmp_path / t).is_file() or (tmp_path / t).stat().st_size == 0]
     assert not missing, f"targets missing after the SLURM run: {missing}"
-    assert planned_jobs(run_snakemake(tmp_path, "-n", *cfgs, *SLURM_TARGETS)) == {}
+    assert planned_jobs(run_snakemake(tmp_path, "-n", *SLURM_TARGETS, *cfgs)) == {}
 
     # every job ran as a SLURM job: recorded COMPLETED in the job completion log ...
     records = [r for r in _jobcomp(offset) if r.get("Name") == run_id]
