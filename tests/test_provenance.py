@@ -31,3 +31,21 @@ def test_config_hash_depends_only_on_the_slice():
     c = provenance.config_sha256({"patient": {"p1": {"coded": {"depth": 0.1}}}})
     assert a == b != c
     assert provenance.config_sha256({"a": 1, "b": 2}) == provenance.config_sha256({"b": 2, "a": 1})
+
+
+def test_code_files_follow_the_imports_of_the_modules_a_rule_uses():
+    unit = provenance.code_files("fem")
+    assert "workflow/fem/_solve.py" in unit and "workflow/fem/_linsolve.py" in unit  # relative imports, transitively
+    assert "workflow/fem/_coupled.py" not in unit  # the finger-actuator model does not rerun the unit sweeps
+    check = provenance.code_files("fea_check")
+    for f in ("workflow/fem/_coupled.py", "workflow/fem/_finger2d.py", "workflow/fem/__init__.py", "workflow/cascade.py"):
+        assert f in check
+    assert "workflow/mapping.py" in check  # imported lazily inside a function
+    assert "workflow/provenance.py" in unit
+
+
+def test_code_files_names_an_unknown_module():
+    import pytest
+
+    with pytest.raises(FileNotFoundError, match="workflow.no_such_module"):
+        provenance.code_files("no_such_module")

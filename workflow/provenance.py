@@ -9,6 +9,7 @@ Every dataset the workflow writes carries the contract's global attributes
 
 from __future__ import annotations
 
+import ast
 import datetime as _dt
 import hashlib
 import json
@@ -144,20 +145,67 @@ def write_dataset(
     return path
 
 
+def _module_file(pkg: Path, dotted: str) -> Path | None:
+    """The source file of ``workflow.<dotted>`` (a module or a package's ``__init__``), or None."""
+    p = pkg.joinpath(*dotted.split(".")) if dotted else pkg
+    if p.with_suffix(".py").is_file():
+        return p.with_suffix(".py")
+    if (p / "__init__.py").is_file():
+        return p / "__init__.py"
+    return None
+
+
+def _imported_modules(path: Path, dotted: str) -> set[str]:
+    """Dotted names (relative to ``workflow``) of the package modules ``path`` imports, anywhere in it."""
+    package = dotted if path.name == "__init__.py" else dotted.rpartition(".")[0]
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: from the module's package upwards
+                base = package.split(".") if package else []
+                base = base[: len(base) - (node.level - 1)] if node.level > 1 else base
+                mod = ".".join(base + ([node.module] if node.module else []))
+                full = "workflow" + ("." + mod if mod else "")
+            else:
+                full = node.module or ""
+            # `from M import n`: n may itself be a submodule of M
+            names = [full] + [f"{full}.{a.name}" for a in node.names]
+        else:
+            continue
+        for name in names:
+            if name == "workflow" or name.startswith("workflow."):
+                out.add(name[len("workflow."):] if name != "workflow" else "")
+    return out
+
+
 def code_files(*modules: str) -> list[str]:
-    """Source files of ``workflow`` sub-packages/modules, for rule inputs.
+    """Source files a rule's ``workflow`` modules run, for rule inputs.
 
     Listing them as inputs makes Snakemake rerun a rule when the science it
     calls changes (CLARIFICATIONS 20).  ``modules`` are dotted names relative
-    to ``workflow`` (e.g. ``"doe"``, ``"fem"``).
+    to ``workflow`` (e.g. ``"doe"``, ``"fem"``: a package means its
+    ``__init__``); each brings the package modules it imports, transitively
+    (found by parsing, so lazy imports inside functions count), and the
+    packages those live in.  So the unit-model rules that use ``fem`` do not
+    rerun when only the finger-actuator model (``fem._coupled``) changes.
     """
     pkg = Path(__file__).resolve().parent
-    files: list[str] = [str(pkg / "provenance.py")]
-    for mod in modules:
-        p = pkg.joinpath(*mod.split("."))
-        if p.is_dir():
-            files += sorted(str(f) for f in p.rglob("*.py"))
-        else:
-            files.append(str(p.with_suffix(".py")))
+    seen: dict[str, Path] = {}
+    todo = ["provenance", *modules]
+    while todo:
+        dotted = todo.pop()
+        if dotted in seen:
+            continue
+        f = _module_file(pkg, dotted)
+        if f is None:
+            if dotted in modules:
+                raise FileNotFoundError(f"code_files: no module workflow.{dotted}")
+            continue  # `from M import name` where name is not a module
+        seen[dotted] = f
+        parts = dotted.split(".") if dotted else []
+        todo += [".".join(parts[:i]) for i in range(len(parts))]  # enclosing packages run on import
+        todo += sorted(_imported_modules(f, dotted) - seen.keys())
     # Relative paths keep the DAG independent of where the clone lives.
-    return sorted({os.path.relpath(f) for f in files})
+    return sorted({os.path.relpath(f) for f in seen.values()})
