@@ -59,7 +59,7 @@ def _case(h: float, exercises: list[str], plan_path: str | None, surrogates, q):
     solver = dict(cfg["actuator"]["solver"])
     solver.update(cfg["fea_check"]["solver"])
     a3, a2, pm2, pm3 = load_surrogate_angles(*(surrogates or (None, None)))
-    ds, checks, grav = run_fea_check(fea, plan, exercises=exercises, solver=solver, tolerance_deg=5.0,
+    ds, checks, grav, _ = run_fea_check(fea, plan, exercises=exercises, solver=solver, tolerance_deg=5.0,
                                      angle_3d=a3, angle_2d=a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
     rows = []
     for c in checks:

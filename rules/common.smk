@@ -62,8 +62,11 @@ def get_final_output():
     out += ["results/validation/cascade.nc"]
     # The validation patient's plans checked by 2D FEA of the whole actuator on the finger (issue 9).
     # Its finger section comes from the authors' section points: without them the check is left out, and said so.
+    vp = config["cascade"]["validation_patient"]
+    # ... and its stand-alone whole actuators in 2D and 3D (Fig. 22; needs no finger).
+    out += [f"results/patients/{vp}/standalone_actuator.nc"]
     if Path(config["cascade"]["section_points"]).is_file():
-        out += [f"results/patients/{config['cascade']['validation_patient']}/fea_check.nc"]
+        out += [f"results/patients/{vp}/fea_check.nc"]
     else:
         logger.warning(f"FEA check (issue 9) left out: finger section points {config['cascade']['section_points']} "
                        "not found (set cascade.section_points)")
@@ -150,10 +153,9 @@ def get_fea_exercises():
 
 
 def get_fea_surrogates(wildcards):
-    """Input function: the surrogates that map the plan's 3D pressures to 2D, when the check maps them."""
-    if config["fea_check"]["map_pressures"] and config["cascade"]["surrogate"] == "3d":
-        return {f"surrogate_{f}": f"results/actuator/surrogate_{f}.joblib" for f in ("2d", "3d")}
-    return {}
+    """Input function: both surrogates (the 2D-to-3D mapping of the plan's pressures, the reduced-order
+    chains of the 2D-unit prediction and of the correction step)."""
+    return {f"surrogate_{f}": f"results/actuator/surrogate_{f}.joblib" for f in ("2d", "3d")}
 
 
 def get_fea_check_slice(wildcards):

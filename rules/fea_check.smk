@@ -4,8 +4,7 @@
 # workflow/fea_check.py, workflow/fea_model.py, workflow/fea_standalone.py and
 # workflow/fem. Input functions live in rules/common.smk (see the lead's notes):
 #   get_fea_exercises()      -> the exercises checked (config fea_check.exercises or all)
-#   get_fea_surrogates()     -> {"surrogate_2d": ..., "surrogate_3d": ...} when the 2D
-#                               pressures are mapped, else {}
+#   get_fea_surrogates()     -> {"surrogate_2d": ..., "surrogate_3d": ...}
 #   get_fea_check_slice(wc)  -> the config a patient's check depends on
 
 
@@ -16,8 +15,7 @@ rule fea_check:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         joint_loads="results/patients/{patient}/joint_loads.nc",
-        code=code_files("fem", "fea_check", "fea_model", "cascade", "finger", "mapping", "surrogates",
-                        "plots_fea_check"),
+        code=code_files("fea_check", "fea_model", "plots_fea_check", "unit_model"),
     output:
         nc="results/patients/{patient}/fea_check.nc",
         vtu=expand("results/patients/{{patient}}/fea_check_{exercise}.vtu", exercise=get_fea_exercises()),
@@ -33,6 +31,7 @@ rule fea_check:
         actuator=config["actuator"],
         cascade=config["cascade"],
         anthropometry=config["anthropometry"],
+        unit_model=config["surrogates"]["unit_model"],
         config_slice=get_fea_check_slice,
     log:
         "logs/fea_check/fea_check/{patient}.log",

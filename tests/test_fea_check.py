@@ -210,3 +210,92 @@ def test_contact_penalty_factor_scales_the_pair():
     assert np.abs(fa).max() > 0
     np.testing.assert_allclose(fb, 0.25 * fa)
     np.testing.assert_allclose(Kb, 0.25 * Ka, atol=1e-9)
+
+
+def _fake_fea(monkeypatch, truth):
+    """Replace the 2D FEA by another reduced-order chain (``truth``): the correction step only sees angles."""
+    from types import SimpleNamespace
+
+    from workflow import cascade as C
+    from workflow import fea_check as FC
+
+    def fake_check(fea, name, p, solver, gravity=None):
+        eq = C.solve_equilibrium(truth, np.asarray(p, float).ravel())
+        res = SimpleNamespace(status=0, load_factor=1.0, phase="pressure", reason="")
+        return FC.ExerciseCheck(name, np.asarray(p, float), res, eq.joint_angles_deg, eq.actuator_moments_nm,
+                                eq.actuator_moments_nm, np.zeros(2), 0.0)
+
+    monkeypatch.setattr(FC, "check_exercise", fake_check)
+    return fake_check
+
+
+def test_correction_step_replans_with_the_fea_angles_until_the_target_is_reached(monkeypatch):
+    from test_cascade import LIMITS, LinearUnit, model
+    from workflow import cascade as C
+    from workflow import fea_check as FC
+
+    ro = model(LinearUnit())  # what the plan believes
+    truth = model(LinearUnit(c=0.02))  # what the "FEA" does: the same chain with weaker units
+    check = _fake_fea(monkeypatch, truth)
+    target = np.array([45.0, 30.0, 15.0])
+    opts = {"tol_deg": 5.0, "p_max_kpa": 300.0, "tie_cmc_mcp": True, "margin_deg": 0.25, "active_limits_nm": LIMITS}
+    plan = C.plan_exercise(ro, target, **opts)
+    assert plan.achieved
+    first = check(None, "X", C.pressures_table(plan.pressures_kpa), {})
+    assert np.max(np.abs(first.angle_deg - target)) > 5.0  # the plan misses in the "FEA"
+    cor = FC.correct_exercise(None, ro, "X", target, C.pressures_table(plan.pressures_kpa),
+                              plan.equilibrium.joint_angles_deg, first, to_2d=lambda p: p, solver={}, gravity=None,
+                              tolerance_deg=5.0, limits_nm=np.array(LIMITS), plan_opts=opts, max_iterations=4)
+    best = cor.checks[cor.best]
+    assert FC.outcome(best, target, 5.0, np.array(LIMITS))[0], cor.stop_reason
+    assert 1 <= cor.iterations <= 4 and cor.stop_reason.startswith("reached after")
+    assert np.all(cor.pressures_kpa[cor.best] >= cor.pressures_kpa[0] - 1e-9)  # weaker units need more pressure
+
+
+def test_correction_step_stops_when_the_pressures_are_at_their_limit(monkeypatch):
+    from test_cascade import LIMITS, LinearUnit, model
+    from workflow import cascade as C
+    from workflow import fea_check as FC
+
+    ro, truth = model(LinearUnit()), model(LinearUnit(c=0.005))
+    check = _fake_fea(monkeypatch, truth)
+    target = np.array([90.0, 100.0, 80.0])
+    opts = {"tol_deg": 5.0, "p_max_kpa": 300.0, "tie_cmc_mcp": True, "margin_deg": 0.25, "active_limits_nm": LIMITS}
+    plan = C.plan_exercise(ro, target, **opts)
+    p = C.pressures_table(plan.pressures_kpa)
+    first = check(None, "X", p, {})
+    cor = FC.correct_exercise(None, ro, "X", target, p, plan.equilibrium.joint_angles_deg, first,
+                              to_2d=lambda q: q, solver={}, gravity=None, tolerance_deg=5.0,
+                              limits_nm=np.array(LIMITS), plan_opts=opts, max_iterations=3)
+    assert not FC.outcome(cor.checks[cor.best], target, 5.0, np.array(LIMITS))[0]
+    # the top chambers sit at 300 kPa already: more pressure is not available, so it stops without an FEA run
+    assert cor.iterations == 0 and "at the 300 kPa limit" in cor.stop_reason and "MCP" in cor.stop_reason
+
+
+def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
+    from types import SimpleNamespace
+
+    import xarray as xr
+
+    from workflow import fea_standalone as FS
+
+    tried = []
+
+    def fake_solve(um, press, **kw):
+        tried.append((um.dim, um.h))
+        ok = um.dim == 2 or um.h < 3.5  # the 4 mm 3D mesh "fails"
+        curve = np.column_stack([np.linspace(0, um.length, 5), np.zeros(5)] + ([np.zeros(5)] if um.dim == 3 else []))
+        return SimpleNamespace(status=0 if ok else 1, load_factor=1.0 if ok else 0.4, tip_angle_deg=10.0 if ok else 4.0,
+                               backbone_mm=curve, backbone_ref_mm=curve, newton_iterations=5, wall_time_s=1.0,
+                               ndofs=int(um.mesh.p.size))
+
+    monkeypatch.setattr(FS, "solve_standalone", fake_solve)
+    plan = xr.Dataset({"pressure_kpa": (("exercise", "group", "chamber"), np.zeros((1, 4, 2))),
+                       "units_per_group": ("group", np.array([1, 1, 1, 1]))},
+                      coords={"exercise": ["TGE2"], "group": ["CMC", "MCP", "PIP", "DIP"], "chamber": ["top", "bottom"]})
+    ds = FS.standalone_dataset(plan, exercises=["TGE2"], models=["2d_plan", "3d_plan"], actuator_cfg={},
+                               h_2d_mm=2.0, h_3d_mm=[3.0, 4.0], solver={}, p2=np.zeros((1, 4, 2)),
+                               flag=np.zeros((1, 4), int))
+    assert tried == [(2, 2.0), (3, 4.0), (3, 3.0)]  # coarse first, whatever the order given
+    row = ds.sel(exercise="TGE2", model="3d_plan")
+    assert float(row["h_used_mm"]) == 3.0 and bool(row["converged"]) and float(row["wall_time_s"]) == 2.0

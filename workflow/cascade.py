@@ -86,6 +86,7 @@ __all__ = [
     "plan_patient",
     "plans_dataset",
     "patient_finger",
+    "patient_cascade",
     "write_cascade_plan",
 ]
 
@@ -725,6 +726,22 @@ def patient_finger(patient: Mapping[str, Any], loads, moments, ccd, *, cascade_c
     return fing, spring_note
 
 
+def patient_cascade(finger: Finger, unit: Any, cascade_cfg: Mapping[str, Any],
+                    units_per_group: Mapping[str, int] | None = None) -> CascadeModel:
+    """The actuator laid on ``finger`` as the config's ``cascade`` section says (densities, unit counts, straps).
+
+    ``units_per_group`` (e.g. a plan's) overrides the config's counts.  Shared
+    by the planning and the FEA check's correction step (issue 9).
+    """
+    c, d = cascade_cfg, cascade_cfg["densities"]
+    return build_cascade(
+        finger, unit, actuator_dims_mm=c["unit_geometry_mm"], silicone_density=d["silicone"],
+        paper_density=d["paper"], cmc_length_fraction=c["cmc_length_fraction"], tip_units=c["tip_units"],
+        units_per_group=units_per_group or c.get("units_per_group") or None,
+        strap_stiffness_n_per_m=c["strap_stiffness_n_per_m"],
+    )
+
+
 def write_cascade_plan(
     patient_name: str,
     patient: Mapping[str, Any],
@@ -762,12 +779,7 @@ def write_cascade_plan(
     fing, spring_note = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
                                        cascade_cfg=c, anthropometry=anthropometry)
     finger_name = str(patient.get("finger", "F3"))
-    d = c["densities"]
-    model = build_cascade(
-        fing, unit, actuator_dims_mm=c["unit_geometry_mm"], silicone_density=d["silicone"],
-        paper_density=d["paper"], cmc_length_fraction=c["cmc_length_fraction"], tip_units=c["tip_units"],
-        units_per_group=c.get("units_per_group") or None, strap_stiffness_n_per_m=c["strap_stiffness_n_per_m"],
-    )
+    model = patient_cascade(fing, unit, c)
     limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
     targets = {str(e): loads["target_angle_deg"].sel(exercise=e, joint=list(JOINTS)).values
                for e in loads["exercise"].values}

@@ -23,6 +23,23 @@ weight, both from the FE state) against the active safety limits, and
 ``achieved`` = converged to the full load, every joint within the plan's
 tolerance and every moment within its limit.  Full-width values: the 2D
 per-mm results times the actuator width.  Angles deg, moments N m, forces N.
+
+Where the FEA and the plan part.  Beside the plan's own prediction (its
+reduced-order chain with the unit surrogate it planned with), the chain is
+solved with the 2D unit surrogate at the 2D pressures applied
+(``predicted_2d_angle_deg``): plan minus that is what the 2D-to-3D mapping
+changes (it matches free angles, not blocked moments), that minus the FEA is
+what the chain's kinematics miss (all units of a span bending alike, no
+contact geometry).
+
+Correction step (``correction.max_iterations`` > 0).  For an exercise the
+FEA misses, the plan is re-made with the FEA's angles: the reduced-order
+chain is asked for ``target - (FEA - chain)`` at the current pressures, the
+new pressures are mapped to 2D and checked again, at most
+``max_iterations`` times; it stops early when the re-plan changes no pressure
+by ``min_change_kpa`` (the spans sit at their pressure limit, say).  The best
+check (fewest joints out of tolerance, then the least total error) is kept
+as ``corrected_*``; every iteration's pressures and angles are stored.
 """
 
 from __future__ import annotations
@@ -37,14 +54,14 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import xarray as xr
 
-from workflow.cascade import CHAMBERS, GROUPS
+from workflow.cascade import CHAMBERS, GROUPS, CascadeModel
 from workflow.fea_model import PatientFEA
 from workflow.fem import STATUS_FLAGS
 from workflow.fem._coupled import CoupledResult, solve_coupled
 from workflow.finger import JOINTS
 
-__all__ = ["MAPPING_FLAGS", "pressures_2d", "ExerciseCheck", "check_exercise", "gravity_state", "fea_check_dataset",
-           "write_deformed"]
+__all__ = ["MAPPING_FLAGS", "pressures_2d", "ExerciseCheck", "outcome", "Correction", "correct_exercise", "check_exercise",
+           "gravity_state", "fea_check_dataset", "write_deformed", "run_fea_check", "write_fea_check"]
 
 log = logging.getLogger(__name__)
 
@@ -105,6 +122,116 @@ def _signed_peak(a: np.ndarray) -> np.ndarray:
     return a[np.argmax(np.abs(a), axis=0), np.arange(a.shape[1])]
 
 
+def outcome(check: ExerciseCheck, target_deg: np.ndarray, tolerance_deg: float,
+            limits_nm: np.ndarray) -> tuple[bool, tuple[int, float], list[str]]:
+    """(achieved, score, reasons) of one check: score = (joints off target, total |error| deg), smaller is better.
+
+    Achieved = the pressures reached in full, every joint within
+    ``tolerance_deg`` of its target, every largest actuator moment within its
+    active limit.
+    """
+    res, ang = check.result, np.asarray(check.angle_deg, float)
+    lam = res.load_factor if res.phase == "pressure" else 0.0
+    converged = res.status == 0 and lam >= 1.0 - 1e-9
+    err = ang - np.asarray(target_deg, float)
+    off = np.abs(err) > tolerance_deg
+    over = np.abs(check.max_actuator_moment_nm) > limits_nm
+    reasons = [] if converged else [f"stopped at load factor {lam:.3f} of the {res.phase} phase ({res.reason})"]
+    reasons += [f"{JOINTS[j]} off target by {err[j]:+.1f} deg" for j in np.flatnonzero(off)]
+    reasons += [f"{JOINTS[j]} moment {check.max_actuator_moment_nm[j]:.3g} N m above the active limit {limits_nm[j]:.3g}"
+                for j in np.flatnonzero(over)]
+    score = (int(np.sum(off)) + (0 if converged else 3), float(np.nansum(np.abs(err))))
+    return converged and not off.any() and not over.any(), score, reasons
+
+
+@dataclass
+class Correction:
+    """The correction step of one exercise: iteration 0 is the plan's own check."""
+
+    pressures_kpa: list  # (group, chamber) planned (plan's surrogate) per iteration
+    pressures_2d_kpa: list  # applied in the 2D model
+    checks: list  # ExerciseCheck per iteration
+    predicted_deg: list  # the reduced-order chain's angles at that iteration's pressures
+    best: int
+    stop_reason: str
+
+    @property
+    def iterations(self) -> int:
+        """FEA re-checks run after the plan's own."""
+        return len(self.checks) - 1
+
+
+def _saturated_joints(angle_deg, target_deg, tolerance_deg, p_now, p_new, p_max) -> list[str]:
+    """Joints off target whose driving chambers (top to flex, bottom to extend, over the joint's span) sit at
+    ``p_max`` now and in the re-plan: more of the same pressure is not available."""
+    from workflow.cascade import SPANS
+
+    out = []
+    for j, joint in enumerate(JOINTS):
+        miss = float(target_deg[j] - angle_deg[j])
+        if abs(miss) <= tolerance_deg:
+            continue
+        c = 0 if miss > 0 else 1
+        rows = [GROUPS.index(g) for g in SPANS[joint]]
+        if all(min(p_now[r, c], p_new[r, c]) >= p_max * (1 - 1e-6) for r in rows):
+            out.append(joint)
+    return out
+
+
+def correct_exercise(fea: PatientFEA, ro: CascadeModel, name: str, target_deg: np.ndarray, p_plan: np.ndarray,
+                     predicted_deg: np.ndarray, first: ExerciseCheck, *, to_2d: Callable, solver: Mapping,
+                     gravity: CoupledResult, tolerance_deg: float, limits_nm: np.ndarray, plan_opts: Mapping,
+                     max_iterations: int, min_change_kpa: float = 1.0) -> Correction:
+    """Re-plan with the FEA's angles until the FEA reaches the target (see the module docstring).
+
+    ``ro``: the reduced-order chain the plan was made with; ``p_plan`` (4, 2)
+    its pressures (kPa) and ``predicted_deg`` its angles there; ``first`` the
+    FEA check of the plan; ``to_2d``: (4, 2) planned -> (4, 2) applied 2D
+    pressures; ``plan_opts``: keywords of :func:`workflow.cascade.plan_exercise`.
+    """
+    from workflow.cascade import plan_exercise, pressures_table
+
+    target = np.asarray(target_deg, float)
+    cor = Correction([np.asarray(p_plan, float)], [np.asarray(first.pressures_kpa, float)], [first],
+                     [np.asarray(predicted_deg, float)], 0, "")
+    ok, best_score, _ = outcome(first, target, tolerance_deg, limits_nm)
+    if ok:
+        cor.stop_reason = "reached by the plan"
+        return cor
+    p_max = float(plan_opts.get("p_max_kpa", np.inf))
+    for k in range(1, int(max_iterations) + 1):
+        offset = cor.checks[-1].angle_deg - cor.predicted_deg[-1]
+        new = plan_exercise(ro, target - offset, exercise=name, **plan_opts)
+        p3 = pressures_table(new.pressures_kpa)
+        stuck = _saturated_joints(cor.checks[-1].angle_deg, target, tolerance_deg, cor.pressures_kpa[-1], p3, p_max)
+        if stuck:
+            cor.stop_reason = (f"{', '.join(stuck)} short of target with the chambers that would move "
+                               f"{'it' if len(stuck) == 1 else 'them'} at the {p_max:g} kPa limit: no re-plan can reach it")
+            break
+        if np.max(np.abs(p3 - cor.pressures_kpa[-1])) < min_change_kpa:
+            cor.stop_reason = (f"re-plan {k} changes no pressure by {min_change_kpa:g} kPa"
+                               + (f" ({new.reason})" if new.reason else ""))
+            break
+        p2 = to_2d(p3)
+        chk = check_exercise(fea, name, p2, solver, gravity=gravity)
+        cor.pressures_kpa.append(p3)
+        cor.pressures_2d_kpa.append(p2)
+        cor.checks.append(chk)
+        cor.predicted_deg.append(new.equilibrium.joint_angles_deg)
+        ok, score, _ = outcome(chk, target, tolerance_deg, limits_nm)
+        log.info("%s correction %d: plan %s kPa (2D %s) -> FEA %s deg (target %s), %s", name, k,
+                 np.round(p3.ravel(), 1), np.round(p2.ravel(), 1), np.round(chk.angle_deg, 1), target,
+                 "reached" if ok else "not reached")
+        if score < best_score:
+            cor.best, best_score = k, score
+        if ok:
+            cor.stop_reason = f"reached after {k} correction(s)"
+            break
+    else:
+        cor.stop_reason = cor.stop_reason or f"not reached in {int(max_iterations)} correction(s)"
+    return cor
+
+
 def check_exercise(fea: PatientFEA, name: str, pressures_kpa: np.ndarray, solver: Mapping,
                    gravity: CoupledResult | None = None) -> ExerciseCheck:
     """Ramp one exercise's pressures (group, chamber) kPa from the gravity state; never raises for divergence."""
@@ -125,10 +252,51 @@ def check_exercise(fea: PatientFEA, name: str, pressures_kpa: np.ndarray, solver
         peak_memory_mb=peak / 2**20, wall_time_s=time.perf_counter() - t0)
 
 
+def _corrections_dataset(corrections: Sequence[Correction], ex: Sequence[str], tgt: np.ndarray, tolerance_deg: float,
+                         lim: np.ndarray) -> xr.Dataset:
+    """The correction step's variables: every iteration (0 = the plan's check) and the best one."""
+    n_it = max(c.iterations for c in corrections) + 1
+    shape = (len(ex), n_it)
+    ang = np.full(shape + (3,), np.nan)
+    pred = np.full_like(ang, np.nan)
+    p3 = np.full(shape + (4, 2), np.nan)
+    p2 = np.full_like(p3, np.nan)
+    for i, c in enumerate(corrections):
+        for k, chk in enumerate(c.checks):
+            ang[i, k], pred[i, k] = chk.angle_deg, c.predicted_deg[k]
+            p3[i, k], p2[i, k] = c.pressures_kpa[k], c.pressures_2d_kpa[k]
+    best = [c.checks[c.best] for c in corrections]
+    ok = np.array([outcome(b, tgt[i], tolerance_deg, lim)[0] for i, b in enumerate(best)])
+    deg, kpa = {"units": "degree"}, {"units": "kPa"}
+    gc = ("group", "chamber")
+    return xr.Dataset(
+        {
+            "iteration_angle_deg": (("exercise", "iteration", "joint"), ang, {**deg, "long_name": "joint angle in the FEA per correction iteration (0: the plan)"}),
+            "iteration_predicted_angle_deg": (("exercise", "iteration", "joint"), pred, {**deg, "long_name": "reduced-order chain's angle at that iteration's pressures"}),
+            "iteration_pressure_kpa": (("exercise", "iteration", *gc), p3, {**kpa, "long_name": "planned pressure per correction iteration (the plan's surrogate)"}),
+            "iteration_pressure_2d_kpa": (("exercise", "iteration", *gc), p2, {**kpa, "long_name": "pressure applied to the 2D model per correction iteration"}),
+            "correction_iterations": ("exercise", np.array([c.iterations for c in corrections], dtype="i4"), {"units": "1", "long_name": "FEA re-checks run by the correction step"}),
+            "correction_best": ("exercise", np.array([c.best for c in corrections], dtype="i4"), {"units": "1", "long_name": "iteration kept as corrected (fewest joints off target, then least error)"}),
+            "correction_reason": ("exercise", np.array([c.stop_reason for c in corrections], dtype=object), {"units": "1", "long_name": "why the correction step stopped"}),
+            "corrected_angle_deg": (("exercise", "joint"), np.array([b.angle_deg for b in best]), {**deg, "long_name": "joint angle in the FEA at the corrected pressures"}),
+            "corrected_pressure_kpa": (("exercise", *gc), np.array([c.pressures_kpa[c.best] for c in corrections]), {**kpa, "long_name": "corrected plan (the plan's surrogate)"}),
+            "corrected_pressure_2d_kpa": (("exercise", *gc), np.array([c.pressures_2d_kpa[c.best] for c in corrections]), {**kpa, "long_name": "corrected pressure applied to the 2D model"}),
+            "achieved_corrected": ("exercise", ok, {"units": "1", "long_name": f"reached in the FEA after the correction step (within {tolerance_deg:g} deg, limits held)"}),
+        },
+        coords={"exercise": list(ex), "iteration": np.arange(n_it)},
+    )
+
+
 def fea_check_dataset(checks: Sequence[ExerciseCheck], plan: xr.Dataset, gravity: CoupledResult, *,
                       tolerance_deg: float, width_mm: float, pressures_plan_kpa: np.ndarray, mapping_flag: np.ndarray,
+                      predicted_2d_deg: np.ndarray | None = None, corrections: Sequence[Correction] | None = None,
                       notes: Mapping[str, Any] | None = None) -> xr.Dataset:
-    """``fea_check.nc`` content (without provenance) for the checked exercises."""
+    """``fea_check.nc`` content (without provenance) for the checked exercises.
+
+    ``predicted_2d_deg`` (exercise, joint): the reduced-order chain with the
+    2D unit at the applied pressures; ``corrections``: per exercise, the
+    correction step (adds the ``iteration`` dimension and ``corrected_*``).
+    """
     ex = [c.exercise for c in checks]
     tgt = plan["target_angle_deg"].sel(exercise=ex, joint=list(JOINTS)).values
     pred = plan["predicted_angle_deg"].sel(exercise=ex, joint=list(JOINTS)).values
@@ -137,20 +305,11 @@ def fea_check_dataset(checks: Sequence[ExerciseCheck], plan: xr.Dataset, gravity
     status = np.array([c.result.status for c in checks], dtype="i1")
     lam = np.array([c.result.load_factor if c.result.phase == "pressure" else 0.0 for c in checks])
     converged = (status == 0) & (lam >= 1.0 - 1e-9)
-    within_tol = np.all(np.abs(ang - tgt) <= tolerance_deg, axis=1)
     mom = np.array([c.max_actuator_moment_nm for c in checks])
     within_lim = np.all(~(np.abs(mom) > lim), axis=1)
-    achieved = converged & within_tol & within_lim
-    reasons = []
-    for i, c in enumerate(checks):
-        r = []
-        if not converged[i]:
-            r.append(f"stopped at load factor {lam[i]:.3f} of the {c.result.phase} phase ({c.result.reason})")
-        for j in np.flatnonzero(np.abs(ang[i] - tgt[i]) > tolerance_deg):
-            r.append(f"{JOINTS[j]} off target by {ang[i, j] - tgt[i, j]:+.1f} deg")
-        for j in np.flatnonzero(np.abs(mom[i]) > lim):
-            r.append(f"{JOINTS[j]} moment {mom[i, j]:.3g} N m above the active limit {lim[j]:.3g}")
-        reasons.append("; ".join(r))
+    judged = [outcome(c, tgt[i], tolerance_deg, lim) for i, c in enumerate(checks)]
+    achieved = np.array([j[0] for j in judged])
+    reasons = ["; ".join(j[2]) for j in judged]
     flag_vals = np.array(sorted(STATUS_FLAGS), dtype="i1")
     map_vals = np.array(sorted(MAPPING_FLAGS), dtype="i1")
     plan_ach = plan["achieved"].sel(exercise=ex).values.astype(bool) if "achieved" in plan else np.full(len(ex), False)
@@ -195,6 +354,16 @@ def fea_check_dataset(checks: Sequence[ExerciseCheck], plan: xr.Dataset, gravity
         },
         coords={"exercise": ex, "joint": list(JOINTS), "group": list(GROUPS), "chamber": list(CHAMBERS), "strap": ["PIP", "DIP"]},
     )
+    if predicted_2d_deg is not None:
+        p2d = np.asarray(predicted_2d_deg, float)
+        ds["predicted_2d_angle_deg"] = (("exercise", "joint"), p2d, {
+            **deg, "long_name": "reduced-order chain with the 2D unit surrogate at the applied 2D pressures"})
+        ds["mapping_error_deg"] = (("exercise", "joint"), p2d - pred, {
+            **deg, "long_name": "what the 2D-to-3D mapping changes in the chain: 2D-unit minus planned prediction"})
+        ds["chain_error_deg"] = (("exercise", "joint"), ang - p2d, {
+            **deg, "long_name": "what the chain misses: FEA minus the chain with the 2D unit at the same pressures"})
+    if corrections:
+        ds = ds.merge(_corrections_dataset(corrections, ex, tgt, tolerance_deg, lim))
     ds.attrs.update({
         "tolerance_deg": float(tolerance_deg),
         "gravity_status": int(gravity.status),
@@ -234,16 +403,32 @@ def load_surrogate_angles(surrogate_2d: str | None, surrogate_3d: str | None):
 
 def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str] | None, solver: Mapping,
                   tolerance_deg: float, angle_3d=None, angle_2d=None, p_max_2d_kpa: float = np.inf,
-                  p_max_3d_kpa: float = np.inf, notes: Mapping[str, Any] | None = None):
-    """Gravity state, then every exercise -> (dataset, checks, gravity result)."""
+                  p_max_3d_kpa: float = np.inf, ro_plan=None, ro_2d=None, correction: Mapping | None = None,
+                  plan_opts: Mapping | None = None, notes: Mapping[str, Any] | None = None):
+    """Gravity state, then every exercise -> (dataset, checks, gravity result, corrections).
+
+    ``ro_plan`` / ``ro_2d``: the reduced-order chain (``CascadeModel``) with
+    the plan's and with the 2D unit surrogate; ``correction``: ``{max_iterations,
+    min_change_kpa}`` (needs ``ro_plan`` and ``plan_opts``, the keywords of
+    :func:`workflow.cascade.plan_exercise` the plan was made with).
+    """
+    from workflow.cascade import solve_equilibrium
+
     ex = [str(e) for e in plan["exercise"].values] if not exercises else [str(e) for e in exercises]
     p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
-    p2, flag = pressures_2d(p_plan, angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa)
+
+    def to_2d(p3):
+        return pressures_2d(p3, angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa)
+
+    p2, flag = to_2d(p_plan)
+    targets = plan["target_angle_deg"].sel(exercise=ex, joint=list(JOINTS)).values
+    lim = np.abs(plan["active_limit_nm"].sel(joint=list(JOINTS)).values) if "active_limit_nm" in plan else np.full(3, np.nan)
     grav = gravity_state(fea, solver)
     log.info("gravity: status %d at load factor %.3f, droop %s deg, %d Newton iterations, %.1f s",
              grav.status, grav.load_factor, np.round(grav.joint_angles_deg, 2), grav.newton_iterations,
              grav.wall_time_s)
-    checks = []
+    n_cor = int((correction or {}).get("max_iterations", 0)) if ro_plan is not None else 0
+    checks, corrections, pred_2d = [], [], []
     for i, name in enumerate(ex):
         if grav.status != 0:  # no converged gravity state: nothing to ramp from
             c = ExerciseCheck(name, p2[i], grav, grav.joint_angles_deg, np.full(3, np.nan), np.full(3, np.nan),
@@ -251,21 +436,39 @@ def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str]
         else:
             c = check_exercise(fea, name, p2[i], solver, gravity=grav)
         log.info("%s: pressures %s kPa -> angles %s deg (target %s, plan %s), status %d at %.3f, %d its, %.1f s",
-                 name, np.round(p2[i].ravel(), 1), np.round(c.angle_deg, 1),
-                 plan["target_angle_deg"].sel(exercise=name).values, np.round(plan["predicted_angle_deg"].sel(exercise=name).values, 1),
+                 name, np.round(p2[i].ravel(), 1), np.round(c.angle_deg, 1), targets[i],
+                 np.round(plan["predicted_angle_deg"].sel(exercise=name).values, 1),
                  c.result.status, c.result.load_factor, c.result.newton_iterations, c.wall_time_s)
         checks.append(c)
+        if ro_2d is not None:
+            pred_2d.append(solve_equilibrium(ro_2d, p2[i].ravel()).joint_angles_deg)
+        if n_cor and grav.status == 0:
+            corrections.append(correct_exercise(
+                fea, ro_plan, name, targets[i], p_plan[i], plan["predicted_angle_deg"].sel(exercise=name).values, c,
+                to_2d=lambda p3: to_2d(p3)[0], solver=solver, gravity=grav, tolerance_deg=tolerance_deg,
+                limits_nm=lim, plan_opts=plan_opts or {}, max_iterations=n_cor,
+                min_change_kpa=float((correction or {}).get("min_change_kpa", 1.0))))
+            log.info("%s: correction step: %s", name, corrections[-1].stop_reason)
     ds = fea_check_dataset(checks, plan, grav, tolerance_deg=tolerance_deg, width_mm=fea.width_mm,
-                           pressures_plan_kpa=p_plan, mapping_flag=flag, notes={"model": fea.notes, **dict(notes or {})})
-    return ds, checks, grav
+                           pressures_plan_kpa=p_plan, mapping_flag=flag,
+                           predicted_2d_deg=np.array(pred_2d) if pred_2d else None,
+                           corrections=corrections if len(corrections) == len(checks) else None,
+                           notes={"model": fea.notes, **dict(notes or {})})
+    return ds, checks, grav, corrections
 
 
 def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: str, joint_loads_nc: str, moments_nc: str,
                     ccd_nc: str, out_nc: str, out_vtu: Sequence[str], out_png: str | None, fea_cfg: Mapping,
                     actuator_cfg: Mapping, cascade_cfg: Mapping, anthropometry: Mapping, config_slice: Any,
-                    surrogate_2d: str | None = None, surrogate_3d: str | None = None, rule: str = "fea_check"):
-    """The rule's entry point: build the patient's FE model, check the plan, write .nc, .vtu per exercise, plot."""
-    from workflow.cascade import patient_finger
+                    surrogate_2d: str | None = None, surrogate_3d: str | None = None,
+                    unit_model_cfg: Mapping | None = None, rule: str = "fea_check"):
+    """The rule's entry point: build the patient's FE model, check the plan, write .nc, .vtu per exercise, plot.
+
+    With the surrogates and ``unit_model_cfg`` (config ``surrogates.unit_model``)
+    the reduced-order chains are built too: the 2D-unit prediction and the
+    correction step (config ``fea_check.correction``).
+    """
+    from workflow.cascade import patient_cascade, patient_finger
     from workflow.fea_model import build_patient_fea
     from workflow.provenance import write_dataset
 
@@ -282,11 +485,24 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
     a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
     if use_map and a3 is None:
         log.warning("no surrogates given: the plan's 3D pressures are applied to the 2D model unchanged")
+    ro_plan = ro_2d = None
+    if unit_model_cfg is not None and surrogate_2d and surrogate_3d:
+        from workflow.unit_model import load_unit_model
+
+        units = {"2d": surrogate_2d, "3d": surrogate_3d}
+        ro_2d = patient_cascade(finger, load_unit_model(surrogate_2d, **unit_model_cfg), cascade_cfg, upg)
+        ro_plan = patient_cascade(finger, load_unit_model(units[cascade_cfg.get("surrogate", "3d")], **unit_model_cfg),
+                                  cascade_cfg, upg)
+    plan_opts = {"tol_deg": float(cascade_cfg["tolerance_deg"]), "p_max_kpa": float(cascade_cfg["p_max_kpa"]),
+                 "tie_cmc_mcp": bool(cascade_cfg["tie_cmc_mcp"]), "margin_deg": float(cascade_cfg["margin_deg"]),
+                 "active_limits_nm": np.abs(plan["active_limit_nm"].sel(joint=list(JOINTS)).values)
+                 if "active_limit_nm" in plan else None}
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
-    ds, checks, grav = run_fea_check(fea, plan, exercises=fea_cfg.get("exercises") or None, solver=solver,
+    ds, checks, grav, corrections = run_fea_check(fea, plan, exercises=fea_cfg.get("exercises") or None, solver=solver,
                                      tolerance_deg=float(cascade_cfg["tolerance_deg"]), angle_3d=a3, angle_2d=a2,
-                                     p_max_2d_kpa=pm2, p_max_3d_kpa=pm3,
+                                     p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, ro_plan=ro_plan, ro_2d=ro_2d,
+                                     correction=fea_cfg.get("correction"), plan_opts=plan_opts,
                                      notes={"patient": patient_name, "springs": spring_note,
                                             "pressures": "2D-to-3D mapped" if a3 is not None else "plan's, unchanged"})
     write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
@@ -300,6 +516,7 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
         from workflow.plots_fea_check import plot_fea_poses
 
         cm = fea.setup.cm
+        corrected = [c.checks[c.best].result.u if c.best else None for c in corrections] if corrections else None
         plot_fea_poses(cm.mesh.p, cm.mesh.t, cm.material, [c.result.u for c in checks], ds, finger, out_png,
-                       title=f"patient {patient_name}")
+                       title=f"patient {patient_name}", corrected_states=corrected)
     return ds

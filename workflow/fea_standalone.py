@@ -7,7 +7,9 @@ no gravity, each exercise's pressures ramped from zero, in up to three models:
   (:func:`workflow.fea_check.pressures_2d`), the pressures the FEA check uses;
 * ``2d_plan``: plane strain at the planned (3D) pressures unchanged (the
   paper's "limited bending" comparison the other way round);
-* ``3d_plan``: the 3D half model at the planned pressures (coarse mesh).
+* ``3d_plan``: the 3D half model at the planned pressures, on the coarsest
+  mesh that converges: the element sizes ``h_3d_mm`` are tried coarse to fine
+  per exercise until one reaches the full pressures (``h_used_mm``).
 
 Compared by the backbone curve (paper-layer mid-line, resampled at common
 stations along the undeformed actuator) and the tip angle.  A model that does
@@ -41,9 +43,14 @@ def resample_backbone(curve: np.ndarray, ref: np.ndarray, stations: np.ndarray) 
 
 
 def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Sequence[str], actuator_cfg: Mapping,
-                       h_2d_mm: float, h_3d_mm: float, solver: Mapping, p2: np.ndarray, flag: np.ndarray,
-                       n_stations: int = 41) -> xr.Dataset:
-    """Solve every (exercise, model) and collect curves and tip angles."""
+                       h_2d_mm: float, h_3d_mm: float | Sequence[float], solver: Mapping, p2: np.ndarray,
+                       flag: np.ndarray, n_stations: int = 41) -> xr.Dataset:
+    """Solve every (exercise, model) and collect curves and tip angles.
+
+    ``h_3d_mm``: one element size or several, tried coarse to fine per
+    exercise until the 3D solve reaches the full pressures.
+    """
+    h3_list = sorted(np.atleast_1d(np.asarray(h_3d_mm, float)).tolist(), reverse=True)
     geom = dict(fem.DEFAULT_GEOMETRY)
     geom.update(dict(actuator_cfg.get("geometry", {})))
     upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
@@ -56,25 +63,34 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
     by = np.full_like(bx, np.nan)
     tip, lam, wall = np.full(shape, np.nan), np.zeros(shape), np.zeros(shape)
     status = np.full(shape, -1, dtype="i1")
-    its, ndofs = np.zeros(shape, dtype="i4"), np.zeros(len(models), dtype="i4")
+    its, ndofs = np.zeros(shape, dtype="i4"), np.zeros(shape, dtype="i4")
+    h_used = np.full(shape, np.nan)
     meshes = {}
     mat = actuator_cfg.get("material")
     contact = {k: v for k, v in dict(actuator_cfg.get("contact", {})).items() if k != "enabled"}
+    layers = int(actuator_cfg.get("mesh", {}).get("paper_layers", 1))
+
+    def mesh(dim, h):
+        if (dim, h) not in meshes:
+            meshes[dim, h] = build_actuator_mesh(geom, upg, h=h, dim=dim, paper_layers=layers)
+        return meshes[dim, h]
+
     for j, m in enumerate(models):
         dim = 3 if m.startswith("3d") else 2
-        if dim not in meshes:
-            meshes[dim] = build_actuator_mesh(geom, upg, h=h_3d_mm if dim == 3 else h_2d_mm, dim=dim,
-                                              paper_layers=int(actuator_cfg.get("mesh", {}).get("paper_layers", 1)))
-        um = meshes[dim]
         for i, ex in enumerate(exercises):
             pk = p2[i] if m == "2d_mapped" else p_plan[i]
             press = {g: (float(pk[k, 0]), float(pk[k, 1])) for k, g in enumerate(GROUPS)}
-            r = solve_standalone(um, press, material=mat, contact_options=contact, solver=solver)
+            t_case = 0.0
+            for h in (h3_list if dim == 3 else [float(h_2d_mm)]):
+                r = solve_standalone(mesh(dim, h), press, material=mat, contact_options=contact, solver=solver)
+                t_case += r.wall_time_s
+                log.info("%s %s (h = %g mm, %d dofs): tip %.1f deg, status %d at %.3f, %d its, %.1f s", ex, m, h,
+                         r.ndofs, r.tip_angle_deg, r.status, r.load_factor, r.newton_iterations, r.wall_time_s)
+                if r.status == 0:
+                    break
             bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)
             tip[i, j], lam[i, j], status[i, j] = r.tip_angle_deg, r.load_factor, r.status
-            its[i, j], wall[i, j], ndofs[j] = r.newton_iterations, r.wall_time_s, r.ndofs
-            log.info("%s %s: tip %.1f deg, status %d at %.3f, %d its, %.1f s, %d dofs", ex, m, r.tip_angle_deg,
-                     r.status, r.load_factor, r.newton_iterations, r.wall_time_s, r.ndofs)
+            its[i, j], wall[i, j], ndofs[i, j], h_used[i, j] = r.newton_iterations, t_case, r.ndofs, h
     flag_vals = np.array(sorted(fem.STATUS_FLAGS), dtype="i1")
     map_vals = np.array(sorted(MAPPING_FLAGS), dtype="i1")
     ds = xr.Dataset(
@@ -87,8 +103,9 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
             "status": (("exercise", "model"), status, {"units": "1", "long_name": "solver status", "flag_values": flag_vals,
                                                        "flag_meanings": " ".join(fem.STATUS_FLAGS[int(v)] for v in flag_vals)}),
             "newton_iterations": (("exercise", "model"), its, {"units": "1", "long_name": "Newton iterations"}),
-            "wall_time_s": (("exercise", "model"), wall, {"units": "s", "long_name": "wall time of the solve"}),
-            "ndofs": ("model", ndofs, {"units": "1", "long_name": "degrees of freedom"}),
+            "wall_time_s": (("exercise", "model"), wall, {"units": "s", "long_name": "wall time of the solves (incl. coarser meshes that failed)"}),
+            "ndofs": (("exercise", "model"), ndofs, {"units": "1", "long_name": "degrees of freedom of the mesh kept"}),
+            "h_used_mm": (("exercise", "model"), h_used, {"units": "mm", "long_name": "element size kept (3D: the coarsest that converged, else the finest tried)"}),
             "pressure_plan_kpa": (("exercise", "group", "chamber"), p_plan, {"units": "kPa", "long_name": "planned (3D) pressure"}),
             "pressure_2d_kpa": (("exercise", "group", "chamber"), p2, {"units": "kPa", "long_name": "2D pressure of the mapping"}),
             "mapping_status": (("exercise", "group"), flag.astype("i1"), {
@@ -106,7 +123,7 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
                                 {"units": "mm", "long_name": "RMS distance of the 2d_mapped and 3d_plan backbone curves"})
         ds["tip_angle_diff_deg"] = (("exercise",), (ds["tip_angle_deg"].sel(model="2d_mapped") - ds["tip_angle_deg"].sel(model="3d_plan")).values,
                                     {"units": "degree", "long_name": "tip angle 2d_mapped minus 3d_plan"})
-    ds.attrs.update({"h_2d_mm": float(h_2d_mm), "h_3d_mm": float(h_3d_mm), "units_per_group": str(upg)})
+    ds.attrs.update({"h_2d_mm": float(h_2d_mm), "h_3d_mm_tried": str(h3_list), "units_per_group": str(upg)})
     return ds
 
 
@@ -127,7 +144,7 @@ def write_standalone(patient_name: str, *, plan_nc: str, out_nc: str, out_png: s
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     ds = standalone_dataset(plan, exercises=ex, models=models, actuator_cfg=actuator_cfg,
-                            h_2d_mm=float(fea_cfg.get("h_actuator_mm", 2.0)), h_3d_mm=float(sa.get("h_3d_mm", 2.5)),
+                            h_2d_mm=float(fea_cfg.get("h_actuator_mm", 2.0)), h_3d_mm=sa.get("h_3d_mm", [4.0, 3.0]),
                             solver=solver, p2=p2, flag=flag)
     ds.attrs["patient"] = patient_name
     write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,

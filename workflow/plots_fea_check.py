@@ -26,38 +26,65 @@ def _cells(ax, p: np.ndarray, t: np.ndarray, material: np.ndarray) -> None:
                                      edgecolors="none", linewidths=0))
 
 
+def _pose_panel(ax, mesh_p, mesh_t, material, u, finger: Finger, target, angles, plan, pressures, groups,
+                head: str, ok: bool) -> None:
+    x = mesh_p + np.asarray(u).reshape(-1, 2).T
+    _cells(ax, x, mesh_t, material)
+    joints, _ = finger.joint_positions(target)
+    tip = finger.pose(target, np.array([[finger.tip_x_m, finger.joints_ref[2, 1]]]), np.array([2]))
+    chain = np.vstack([joints, tip]) * 1e3
+    ax.plot(chain[:, 0], chain[:, 1], "--o", color="firebrick", ms=2.5, lw=1.0)
+    ang = ", ".join(f"{j} {a:.0f}({t:.0f};{q:.0f})" for j, a, t, q in zip(JOINTS, angles, target, plan))
+    txt = "\n".join(f"{g}: {pressures[i, 0]:.0f}/{pressures[i, 1]:.0f}" for i, g in enumerate(groups))
+    ax.text(0.02, 0.02, txt + " kPa", transform=ax.transAxes, fontsize=6, va="bottom", family="monospace")
+    ax.set_title(f"{head}\n{ang} deg", fontsize=7.5, color="k" if ok else "firebrick")
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.tick_params(labelsize=6)
+    ax.set_xlabel("x (mm)", fontsize=7)
+
+
 def plot_fea_poses(mesh_p: np.ndarray, mesh_t: np.ndarray, material: np.ndarray, states: Sequence[np.ndarray],
-                   ds: xr.Dataset, finger: Finger, out: str | Path, title: str = "") -> None:
+                   ds: xr.Dataset, finger: Finger, out: str | Path, title: str = "",
+                   corrected_states: Sequence[np.ndarray | None] | None = None) -> None:
     """One panel per exercise: deformed actuator and finger (FEA), target pose of the
-    joint chain (dashed), angles reached (target; plan) and the applied pressures."""
+    joint chain (dashed), angles reached (target; plan) and the applied pressures.
+
+    With ``corrected_states`` (the correction step's kept state per exercise,
+    None where the plan's own check was kept) a second row shows those.
+    """
     n = len(states)
-    fig, axes = plt.subplots(1, n, figsize=(3.4 * n, 3.8), squeeze=False)
-    for ax, u, ex in zip(axes[0], states, ds["exercise"].values):
-        x = mesh_p + np.asarray(u).reshape(-1, 2).T
-        _cells(ax, x, mesh_t, material)
+    rows = 2 if corrected_states is not None and any(u is not None for u in corrected_states) else 1
+    fig, axes = plt.subplots(rows, n, figsize=(3.4 * n, 3.8 * rows), squeeze=False)
+    groups = ds["group"].values
+    for k, (u, ex) in enumerate(zip(states, ds["exercise"].values)):
         row = ds.sel(exercise=ex)
         tgt = row["target_angle_deg"].values
-        joints, _ = finger.joint_positions(tgt)
-        tip = finger.pose(tgt, np.array([[finger.tip_x_m, finger.joints_ref[2, 1]]]), np.array([2]))
-        chain = np.vstack([joints, tip]) * 1e3
-        ax.plot(chain[:, 0], chain[:, 1], "--o", color="firebrick", ms=2.5, lw=1.0)
-        ang = ", ".join(f"{j} {a:.0f}({t:.0f};{q:.0f})" for j, a, t, q in
-                        zip(JOINTS, row["angle_deg"].values, tgt, row["predicted_angle_deg"].values))
-        p = row["pressure_kpa"].values
-        txt = "\n".join(f"{g}: {p[i, 0]:.0f}/{p[i, 1]:.0f}" for i, g in enumerate(ds["group"].values))
-        ax.text(0.02, 0.02, txt + " kPa", transform=ax.transAxes, fontsize=6, va="bottom", family="monospace")
         ok = bool(row["achieved"].values)
         conv = "" if bool(row["converged"].values) else f" (stopped at {float(row['load_factor']):.2f})"
-        ax.set_title(f"{ex}: {'reached' if ok else 'not reached'}{conv}\n{ang} deg", fontsize=7.5,
-                     color="k" if ok else "firebrick")
-        ax.set_aspect("equal")
-        ax.autoscale_view()
-        ax.tick_params(labelsize=6)
-        ax.set_xlabel("x (mm)", fontsize=7)
-    axes[0, 0].set_ylabel("y, dorsal (mm)", fontsize=7)
+        _pose_panel(axes[0, k], mesh_p, mesh_t, material, u, finger, tgt, row["angle_deg"].values,
+                    row["predicted_angle_deg"].values, row["pressure_kpa"].values, groups,
+                    f"{ex}: {'reached' if ok else 'not reached'}{conv}", ok)
+        if rows == 2:
+            ax = axes[1, k]
+            if corrected_states[k] is None:
+                ax.axis("off")
+                ax.text(0.5, 0.5, f"{ex}: plan kept\n{row['correction_reason'].item()}", ha="center", va="center",
+                        fontsize=7, wrap=True, transform=ax.transAxes)
+                continue
+            b = int(row["correction_best"])
+            ok_c = bool(row["achieved_corrected"].values)
+            _pose_panel(ax, mesh_p, mesh_t, material, corrected_states[k], finger, tgt,
+                        row["corrected_angle_deg"].values, row["iteration_predicted_angle_deg"].isel(iteration=b).values,
+                        row["corrected_pressure_2d_kpa"].values, groups,
+                        f"{ex} corrected ({b} of {int(row['correction_iterations'])}): "
+                        f"{'reached' if ok_c else 'not reached'}", ok_c)
+    for r in range(rows):
+        axes[r, 0].set_ylabel("y, dorsal (mm)", fontsize=7)
     fig.suptitle(f"FEA check, 2D plane strain{': ' + title if title else ''}; dashed: target pose, "
-                 "angle(target; plan)", fontsize=8, y=0.995)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+                 "angle(target; plan)" + ("; lower row: after the correction step" if rows == 2 else ""),
+                 fontsize=8, y=0.995)
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=130)
     plt.close(fig)
