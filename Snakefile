@@ -22,6 +22,7 @@ include: "rules/actuator.smk"
 include: "rules/surrogates.smk"
 include: "rules/cascade.smk"
 include: "rules/fea_check.smk"
+include: "rules/fidelity.smk"
 include: "rules/stability.smk"
 include: "rules/report.smk"
 

@@ -4,7 +4,8 @@
 
 rule unit_check:
     input:
-        code=code_files("fem"),
+        unpack(get_fem_choice),
+        code=code_files("fem", "fidelity"),
     output:
         nc=report("results/actuator/unit_check.nc", caption="../report/unit_check.rst", category="Actuator"),
         vtu="results/actuator/unit_3d_300kpa.vtu",

@@ -5,7 +5,7 @@ from pathlib import Path
 from snakemake.logging import logger
 from snakemake.utils import validate
 
-from workflow import settings
+from workflow import fidelity, settings
 from workflow.provenance import code_files
 
 validate(config, "../config/schema.yaml")
@@ -70,8 +70,9 @@ def get_final_output():
     else:
         logger.warning(f"FEA check (issue 9) left out: finger section points {config['cascade']['section_points']} "
                        "not found (set cascade.section_points)")
-    # Stability maps and the report's plots and tables (issue 7).
+    # Stability maps, speed against accuracy and the report's plots and tables (issue 7).
     out += ["results/stability/stability.nc", "results/musculoskeletal/moment_angle.png"]
+    out += ["results/benchmarks/speed_accuracy.nc", "results/report/speed_accuracy.html"]
     out += expand("results/report/{table}.html", table=["scaling", "musculoskeletal", "unit_check", "surrogate_cv",
                                                        "mapping", "cascade_validation"])
     out += expand("results/patients/{patient}/{table}.html", patient=PATIENTS, table=["joint_loads", "cascade_plan"])
@@ -161,3 +162,43 @@ def get_fea_surrogates(wildcards):
 def get_fea_check_slice(wildcards):
     """Param function: the config one patient's FEA check depends on."""
     return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": config["fea_check"]}
+
+
+# --- Stage fidelity (issue 7 items 1 and 3) -----------------------------------
+FEM_CASES = [c.name for c in fidelity.fem_cases(config["fidelity"]["fem_cases"])]
+
+
+def fidelity_auto():
+    return bool(config["fidelity"]["auto"])
+
+
+def get_fem_choice(wildcards):
+    """Input function: the FE study's choice of mesh, when fidelity.auto picks it."""
+    return {"fidelity": "results/fidelity/fem.nc"} if fidelity_auto() else {}
+
+
+def get_opensim_model(wildcards):
+    """Input function: the reference OpenSim model, when the backend has one (direct sampling)."""
+    if config["musculoskeletal"]["backend"] == "opensim":
+        return {"model": "results/musculoskeletal/opensim/finger_reference.osim"}
+    return {}
+
+
+def get_msk_choice(wildcards):
+    """Input function: the musculoskeletal study (and model) a patient's loads choose from, when fidelity.auto."""
+    return {"msk_study": "results/fidelity/musculoskeletal.nc", **get_opensim_model(wildcards)} if fidelity_auto() else {}
+
+
+def get_check_choice(wildcards):
+    """Input function: the patient's FEA-check mesh study, when fidelity.auto picks the check's mesh."""
+    return {"check_study": f"results/patients/{wildcards.patient}/fidelity_check.nc"} if fidelity_auto() else {}
+
+
+def get_speed_accuracy_inputs(wildcards):
+    """Input function: the validation patient's plan inputs and check study (when the section points exist)."""
+    vp = config["cascade"]["validation_patient"]
+    out = {"joint_loads": f"results/patients/{vp}/joint_loads.nc", "moments_all": "results/musculoskeletal/moments.nc",
+           "ccd": "results/doe/ccd.nc"}
+    if Path(config["cascade"]["section_points"]).is_file():
+        out["check"] = f"results/patients/{vp}/fidelity_check.nc"
+    return out

@@ -11,11 +11,12 @@
 rule fea_check:
     input:
         unpack(get_fea_surrogates),
+        unpack(get_check_choice),
         plan="results/patients/{patient}/cascade_plan.nc",
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         joint_loads="results/patients/{patient}/joint_loads.nc",
-        code=code_files("fea_check", "fea_model", "plots_fea_check", "unit_model"),
+        code=code_files("fea_check", "fea_model", "plots_fea_check", "unit_model", "fidelity"),
     output:
         nc="results/patients/{patient}/fea_check.nc",
         vtu=expand("results/patients/{{patient}}/fea_check_{exercise}.vtu", exercise=get_fea_exercises()),
@@ -32,7 +33,8 @@ rule fea_check:
         cascade=config["cascade"],
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
-        config_slice=get_fea_check_slice,
+        tolerance_deg=config["fidelity"]["tolerance"]["check_deg"],
+        config_slice=lambda wc: get_fea_check_slice(wc) | {"check_tolerance_deg": config["fidelity"]["tolerance"]["check_deg"]},
     log:
         "logs/fea_check/fea_check/{patient}.log",
     benchmark:

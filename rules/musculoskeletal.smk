@@ -53,6 +53,7 @@ rule rsm:
 
 rule patient_loads:
     input:
+        unpack(get_msk_choice),
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         rsm="results/musculoskeletal/rsm.nc",
@@ -70,7 +71,10 @@ rule patient_loads:
         exercises=config["exercises"],
         anthropometry=config["anthropometry"],
         prediction_alpha=config["rsm"]["prediction_alpha"],
-        config_slice=patient_cfg,
+        tolerance=config["fidelity"]["tolerance"]["msk_rel"],
+        scaling=config["scaling"],
+        config_slice=lambda wc: patient_cfg(wc) | ({"fidelity": {"tolerance": config["fidelity"]["tolerance"]["msk_rel"],
+                                                                 "scaling": config["scaling"]}} if config["fidelity"]["auto"] else {}),
     log:
         "logs/patients/{patient}/patient_loads.log",
     benchmark:

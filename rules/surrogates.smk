@@ -5,7 +5,8 @@
 
 rule sweep_shard:
     input:
-        code=code_files("sweep", "fem"),
+        unpack(get_fem_choice),
+        code=code_files("sweep", "fem", "fidelity"),
     output:
         "results/actuator/sweep/{fea}/shard{shard}.nc",
     wildcard_constraints:
@@ -52,7 +53,10 @@ rule surrogate_cv:
         plot=report("results/actuator/surrogate_cv.png", caption="../report/surrogate_cv.rst", category="Actuator"),
     params:
         surrogates=config["surrogates"],
-        config_slice=cfg("sweep", "surrogates"),
+        # fidelity.auto: the fastest regressor within the tolerance (else the best CV score)
+        tolerance=config["fidelity"]["tolerance"]["surrogate_score"] if config["fidelity"]["auto"] else None,
+        config_slice=cfg("sweep", "surrogates") | {"auto": config["fidelity"]["auto"],
+                                                   "tolerance": config["fidelity"]["tolerance"]["surrogate_score"]},
     log:
         "logs/surrogates/surrogate_cv.log",
     benchmark:

@@ -51,7 +51,7 @@ def run_snakemake(workdir: Path, *args: str, check: bool = True, timeout: float 
 
 
 def local_overrides(workdir: Path) -> Path:
-    """Point the table backend at the shared export by absolute path (the copy lives elsewhere)."""
+    """Point the table backend and the finger section at the shared files by absolute path (the copy lives elsewhere)."""
     cfg = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     over: dict = {}
     if cfg.get("musculoskeletal", {}).get("backend", "table") == "table":
@@ -59,6 +59,11 @@ def local_overrides(workdir: Path) -> Path:
         if not table.is_file():
             pytest.skip(f"default backend reads the authors' export, absent here: {table}")
         over["musculoskeletal"] = {"table_path": str(table)}
+    # the authors' finger section beside the repository: the copy reaches it by absolute path, so the
+    # smoke run checks its plan by FEA (issue 9) as the default run does
+    section = (REPO / cfg["cascade"]["section_points"]).resolve()
+    if section.is_file():
+        over["cascade"] = {"section_points": str(section)}
     path = workdir / "config" / "local.yaml"
     path.write_text(yaml.safe_dump(over))
     return path

@@ -214,7 +214,8 @@ def test_snakemake_resumes_a_missing_shard_and_builds_downstream(tmp_path, repo)
     import yaml
 
     small = {"sweep": {f: {"p_max_kpa": 300.0, "n_ratios": 4, "n_pressures": 4, "n_shards": 2} for f in ("2d", "3d")},
-             "surrogates": {"regressors": ["knn", "linear"]}}
+             "surrogates": {"regressors": ["knn", "linear"]},
+             "fidelity": {"auto": False}}  # the sweeps on the config's meshes: no FE fidelity study here
     (tmp_path / "small.yaml").write_text(yaml.safe_dump(small))
     (tmp_path / "Snakefile").write_text(
         f'configfile: "{repo}/config/config.yaml"\n'

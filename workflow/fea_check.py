@@ -461,7 +461,8 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
                     ccd_nc: str, out_nc: str, out_vtu: Sequence[str], out_png: str | None, fea_cfg: Mapping,
                     actuator_cfg: Mapping, cascade_cfg: Mapping, anthropometry: Mapping, config_slice: Any,
                     surrogate_2d: str | None = None, surrogate_3d: str | None = None,
-                    unit_model_cfg: Mapping | None = None, rule: str = "fea_check"):
+                    unit_model_cfg: Mapping | None = None, rule: str = "fea_check",
+                    notes: Mapping[str, Any] | None = None):
     """The rule's entry point: build the patient's FE model, check the plan, write .nc, .vtu per exercise, plot.
 
     With the surrogates and ``unit_model_cfg`` (config ``surrogates.unit_model``)
@@ -504,7 +505,9 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
                                      p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, ro_plan=ro_plan, ro_2d=ro_2d,
                                      correction=fea_cfg.get("correction"), plan_opts=plan_opts,
                                      notes={"patient": patient_name, "springs": spring_note,
-                                            "pressures": "2D-to-3D mapped" if a3 is not None else "plan's, unchanged"})
+                                            "pressures": "2D-to-3D mapped" if a3 is not None else "plan's, unchanged",
+                                            "h_actuator_mm": float(fea_cfg.get("h_actuator_mm", 2.0)),
+                                            **dict(notes or {})})
     write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
                   title=f"2D FEA check of the cascade plan of patient {patient_name}")
     by_name = {c.exercise: c for c in checks}

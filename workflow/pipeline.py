@@ -123,13 +123,33 @@ def write_rsm(ccd: str | Path, moments_nc: str | Path, out: str | Path, exercise
 
 def write_joint_loads(patient_name: str, patient: Mapping, ccd: str | Path, moments_nc: str | Path, rsm_nc: str | Path,
                       out: str | Path, exercises: Mapping, anthropometry: Mapping, prediction_alpha: float,
-                      config_slice: Any, *, rule: str = "patient_loads", plot: str | Path | None = None) -> xr.Dataset:
+                      config_slice: Any, *, rule: str = "patient_loads", plot: str | Path | None = None,
+                      msk_study: str | Path | None = None, model_osim: str | Path | None = None,
+                      tolerance: float = 0.05, scaling: Mapping | None = None) -> xr.Dataset:
+    """Rule ``patient_loads``.  With ``msk_study`` (``fidelity.auto``) the loads come from the response
+    surfaces or from direct OpenSim sampling of the patient, whichever the study says meets ``tolerance``
+    (:func:`workflow.musculoskeletal.direct.loads_method`); the choice and why are in the attrs."""
+    from .musculoskeletal.direct import loads_method
+
     design = design_from_ccd(ccd)
+    x = patient_loads.patient_levels(patient, anthropometry["measures"], anthropometry.get("coded_unit_sd", 1.0))
+    study = xr.load_dataset(msk_study) if msk_study else None
+    method, why = loads_method(study, x, tolerance, model_available=model_osim is not None)
+    direct = None
+    if method == "opensim_direct":
+        from .musculoskeletal.direct import direct_responses
+
+        log.warning("patient %s: %s", patient_name, why)
+        direct = direct_responses(str(model_osim), x, exercises, finger=str(patient.get("finger", "F3")),
+                                  scaling_cfg=scaling, anthropometry=anthropometry)
+    else:
+        log.info("patient %s: %s", patient_name, why)
     with xr.open_dataset(moments_nc) as m, xr.open_dataset(rsm_nc) as r:
         ds = patient_loads.joint_loads(
             patient, m.load(), r.load(), design, exercises, anthropometry["measures"],
-            anthropometry.get("coded_unit_sd", 1.0), prediction_alpha, name=patient_name,
+            anthropometry.get("coded_unit_sd", 1.0), prediction_alpha, name=patient_name, direct=direct,
         )
+    ds.attrs.update({"fidelity": method, "fidelity_reason": why})
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title=f"Joint loads and safety limits of patient {patient_name}")
     if plot is not None:

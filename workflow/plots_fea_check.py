@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Sequence
 
@@ -69,8 +70,9 @@ def plot_fea_poses(mesh_p: np.ndarray, mesh_t: np.ndarray, material: np.ndarray,
             ax = axes[1, k]
             if corrected_states[k] is None:
                 ax.axis("off")
-                ax.text(0.5, 0.5, f"{ex}: plan kept\n{row['correction_reason'].item()}", ha="center", va="center",
-                        fontsize=7, wrap=True, transform=ax.transAxes)
+                why = textwrap.fill(str(row["correction_reason"].item()), 45)
+                ax.text(0.5, 0.5, f"{ex}: plan kept\n{why}", ha="center", va="center", fontsize=6.5,
+                        transform=ax.transAxes, clip_on=True)
                 continue
             b = int(row["correction_best"])
             ok_c = bool(row["achieved_corrected"].values)

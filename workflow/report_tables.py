@@ -209,6 +209,27 @@ def joint_loads_table(ds: xr.Dataset) -> pd.DataFrame:
     return pd.DataFrame(rows).set_index("exercise")
 
 
+def speed_accuracy_table(ds: xr.Dataset) -> pd.DataFrame:
+    """Per method: wall time, one-off setup time and, per quantity group, the largest error (Pareto marked *)."""
+    from workflow.plots_fidelity import GROUPS, group_errors
+
+    rows = []
+    for i, m in enumerate(ds["method"].values):
+        row = {"method": str(m), "family": str(ds["family"].values[i]),
+               "wall time (s)": float(ds["wall_time_s"].values[i])}
+        if "setup_time_s" in ds and float(ds["setup_time_s"].values[i]) > 0:
+            row["setup (s)"] = float(ds["setup_time_s"].values[i])
+        for title, prefix, unit in GROUPS:
+            e = float(group_errors(ds, prefix).values[i])
+            if np.isfinite(e):
+                q = [str(x) for x in ds["quantity"].values if str(x).startswith(prefix)]
+                front = bool(ds["pareto"].sel({"method": m, "quantity": q}).any())
+                rel = "relative" in unit
+                row[title] = (f"{100 * e:.2f} %" if rel else f"{e:.2f}") + (" *" if front else "")
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("method")
+
+
 # name -> (title, [(caption, table function)], dataset attributes quoted as notes)
 TABLES = {
     "scaling": ("Scale factors against Tables 3-4", [("|ours - paper| per body and axis over the 15 runs", scaling_table)],
@@ -221,6 +242,8 @@ TABLES = {
                            [("exercises reached, ours against each of the paper's sets", reached_table),
                             ("pressures per exercise and chamber", cascade_validation_table)], ("patient",)),
     "cascade_plan": ("Cascade plan", [("per exercise", cascade_plan_table)], ("patient", "springs")),
+    "speed_accuracy": ("Speed against accuracy", [("per method: the largest error per quantity group "
+                                                   "(* = on the Pareto front of one of its quantities)", speed_accuracy_table)], ()),
     "joint_loads": ("Joint loads and safety limits", [("passive moment [prediction interval] per exercise; active limit",
                                                        joint_loads_table)], ("patient", "coded_norm")),
 }

@@ -48,6 +48,15 @@ def check_config(config: Mapping[str, Any]) -> None:
     dummy = cascade.get("dummy_patient")
     if dummy and config["patients"][dummy].get("model", "human") != "dummy":
         raise ConfigError(f"cascade.dummy_patient = {dummy!r}: that patient needs `model: dummy`")
+    fid = config.get("fidelity", {})
+    ex = fid.get("check", {}).get("exercise")
+    if ex and ex not in config["exercises"]:
+        raise ConfigError(f"fidelity.check.exercise = {ex!r}: no such exercise (exercises: {sorted(config['exercises'])})")
+    for k, case in enumerate(fid.get("fem_cases", [])):
+        models = {c["model"] for c in fid["fem_cases"] if c["contact"]}
+        if case["model"] not in models:
+            raise ConfigError(f"fidelity.fem_cases[{k}]: model {case['model']} has no case with contact "
+                              "(the finest with contact is the reference)")
     ms = config.get("musculoskeletal", {})
     if ms.get("backend", "table") == "table":
         path = Path(ms.get("table_path", ""))

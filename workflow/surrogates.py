@@ -208,13 +208,25 @@ def cross_validate(
     return ds
 
 
-def select_regressor(cv: xr.Dataset) -> tuple[str, xr.DataArray]:
-    """Apply `SELECTION_RULE` to one FE model's CV results: (chosen name, score per regressor)."""
+def select_regressor(cv: xr.Dataset, tolerance: float | None = None) -> tuple[str, xr.DataArray, str]:
+    """One FE model's CV results -> (chosen name, score per regressor, why).
+
+    Without ``tolerance``: `SELECTION_RULE`.  With it (``fidelity.auto``): the
+    regressor with the shortest prediction time whose score is within
+    ``tolerance`` (model no more than needed), else the best score.
+    """
+    from workflow.fidelity import cheapest_within
+
     score = (cv["rmse"] / cv["target_std"]).mean(("fold", "target"), skipna=False)
     if np.all(np.isnan(score.values)):
         raise ValueError("no regressor completed every fold")
-    best = str(score["regressor"].values[int(np.nanargmin(score.values))])
-    return best, score
+    names = [str(r) for r in score["regressor"].values]
+    if tolerance is None:
+        best = names[int(np.nanargmin(score.values))]
+        return best, score, f"{best}: {SELECTION_RULE} (score {float(score.sel(regressor=best)):.4g})"
+    t = cv["predict_time_s"].mean(("fold", "target")).values
+    ch = cheapest_within("surrogate", names, t, score.values, float(tolerance), unit="RMSE/std")
+    return ch.method, score, ch.reason
 
 
 def surrogate_cv(
@@ -224,23 +236,28 @@ def surrogate_cv(
     k: int = 4,
     folds: int = 5,
     random_state: int = 0,
+    tolerance: float | None = None,
 ) -> xr.Dataset:
     """CV of every regressor for every FE model (``{'2d': ds, '3d': ds}``) -> ``surrogate_cv.nc`` content.
 
     Dims ``fea``, ``regressor``, ``target``, ``fold``; adds ``score`` (fea,
-    regressor), ``selected`` (fea, regressor) and the rule in the attrs.
+    regressor), ``selected`` (fea, regressor), ``choice_reason`` (fea) and the
+    rule in the attrs; ``tolerance``: see :func:`select_regressor`.
     """
-    parts = []
+    parts, reasons = [], []
     for fea, resp in responses.items():
         X, Y = training_data(resp)
         log.info("CV %s: %d converged samples of %d, %d folds", fea, X.shape[0], resp.sizes["point"], folds)
         cv = cross_validate(X, Y, regressors=regressors, k=k, folds=folds, random_state=random_state)
-        best, score = select_regressor(cv)
+        best, score, why = select_regressor(cv, tolerance)
         cv["score"] = score
         cv["selected"] = ("regressor", cv["regressor"].values == best)
-        log.info("CV %s: chosen %s; scores %s", fea, best, dict(zip(score["regressor"].values, score.values.round(5))))
+        reasons.append(why)
+        log.info("CV %s: chosen %s (%s); scores %s", fea, best, why,
+                 dict(zip(score["regressor"].values, score.values.round(5))))
         parts.append(cv.expand_dims(fea=[fea]))
     ds = xr.concat(parts, dim="fea")
+    ds["choice_reason"] = ("fea", np.array(reasons, dtype=object))
     ds["chosen"] = ("fea", np.array([str(ds["regressor"].values[ds["selected"].sel(fea=f).values][0])
                                      for f in ds["fea"].values], dtype=object))
     per_target = "deg for target angle, N m for target moment (see target_units)"
@@ -256,10 +273,13 @@ def surrogate_cv(
         "score": ("1", "selection score: mean over folds and targets of rmse / target_std"),
         "selected": ("1", "regressor chosen for this FE model by the selection rule"),
         "chosen": ("1", "name of the chosen regressor"),
+        "choice_reason": ("1", "why this regressor (rule, scores, tolerance)"),
     }
     for name, (units, long_name) in attrs.items():
         ds[name].attrs.update({"units": units, "long_name": long_name})
-    ds.attrs["selection_rule"] = SELECTION_RULE
+    ds.attrs["selection_rule"] = SELECTION_RULE if tolerance is None else (
+        f"fidelity.auto: the fastest prediction among the regressors whose score (mean RMSE/std) is within "
+        f"{tolerance:g}, else the best score")
     ds.attrs["k_neighbours"] = int(k)
     ds.attrs["folds"] = int(folds)
     ds.attrs["random_state"] = int(random_state)
@@ -381,10 +401,11 @@ def density_study(response: xr.Dataset, designs: Sequence[tuple[int, int]], *, r
 
 def write_surrogate_cv(response_2d: str | Path, response_3d: str | Path, out: str | Path, *, k: int, folds: int,
                        random_state: int, regressors: Sequence[str], config_slice, rule: str = "surrogate_cv",
-                       plot: str | Path | None = None) -> xr.Dataset:
+                       plot: str | Path | None = None, tolerance: float | None = None) -> xr.Dataset:
     """CV of the regressors on both sweeps -> ``surrogate_cv.nc`` (and the CV chart)."""
     responses = {fea: xr.load_dataset(p) for fea, p in (("2d", response_2d), ("3d", response_3d))}
-    ds = surrogate_cv(responses, regressors=regressors, k=k, folds=folds, random_state=random_state)
+    ds = surrogate_cv(responses, regressors=regressors, k=k, folds=folds, random_state=random_state,
+                      tolerance=tolerance)
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title="Cross-validation of surrogates of the unit's angle and moment over (P_T, P_B)")
     if plot is not None:
@@ -400,8 +421,10 @@ def write_surrogate(response: str | Path, cv: str | Path, out: str | Path, *, fe
     resp = xr.load_dataset(response)
     with xr.open_dataset(cv) as c:
         chosen = str(c["chosen"].sel(fea=fea).values)
+        why = str(c["choice_reason"].sel(fea=fea).values) if "choice_reason" in c else ""
     s = fit_surrogate(resp, chosen, fea=fea, k=k, random_state=random_state)
-    log.info("%s: fitted %s on %d samples", fea, chosen, s.n_samples)
+    s.meta.update({"fidelity": chosen, "fidelity_reason": why})
+    log.info("%s: fitted %s on %d samples (%s)", fea, chosen, s.n_samples, why)
     save_surrogate(s, out)
     if plot is not None:
         from workflow.plots_actuator import plot_response

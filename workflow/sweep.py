@@ -414,17 +414,22 @@ def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Seque
 
 def write_shard(out: str | Path, *, fea: str, shard: int, sweep_cfg: Mapping[str, Any],
                 actuator_cfg: Mapping[str, Any], config_slice: Any, rule: str = "sweep_shard",
-                solver: Callable | None = None) -> xr.Dataset:
+                solver: Callable | None = None, attrs: Mapping[str, Any] | None = None) -> xr.Dataset:
     """Solve shard ``shard`` of FE model ``fea`` and write it (atomically) to ``out``.
 
     ``sweep_cfg`` is the model's ``sweep`` config (p_max_kpa, n_ratios,
-    n_pressures, n_shards); ``solver`` defaults to `make_solver(fea, actuator_cfg)`.
+    n_pressures, n_shards); ``solver`` defaults to `make_solver(fea, actuator_cfg)`;
+    ``attrs`` (e.g. the fidelity used and why) go into the file and on to the merged response.
     """
     solver = make_solver(fea, actuator_cfg) if solver is None else solver
     ds = run_shard(solver, shard=int(shard), p_max_kpa=sweep_cfg["p_max_kpa"], n_ratios=sweep_cfg["n_ratios"],
                    n_pressures=sweep_cfg["n_pressures"], n_shards=sweep_cfg["n_shards"])
     ds.attrs["fea"] = fea
     ds.attrs["shard"] = int(shard)
+    mesh = dict(actuator_cfg.get("mesh", {}))
+    ds.attrs["h_mm"] = float(mesh.get(f"h_{fea}_mm", 1.0 if fea == "2d" else 2.0))
+    ds.attrs["contact"] = int(bool(dict(actuator_cfg.get("contact", {})).get("enabled", True)))
+    ds.attrs.update({k: str(v) for k, v in dict(attrs or {}).items()})
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title=f"{fea.upper()} unit pressure sweep, shard {int(shard)}")
     return ds
@@ -441,6 +446,9 @@ def write_response(shards: Sequence[str | Path], out: str | Path, *, fea: str, s
              fea, ds.sizes["point"], int(solved.sum()), n_ok, int((~solved).sum()), wall)
     ds.attrs.update({"fea": fea, "p_max_kpa": float(sweep_cfg["p_max_kpa"]), "n_ratios": int(sweep_cfg["n_ratios"]),
                      "n_pressures": int(sweep_cfg["n_pressures"]), "solver_wall_time_s": wall})
+    first = shards[0] if isinstance(shards[0], xr.Dataset) else xr.load_dataset(shards[0])
+    # the mesh the shards were solved on, and why
+    ds.attrs.update({k: v for k, v in first.attrs.items() if k in ("h_mm", "contact") or k.startswith("fidelity")})
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title=f"{fea.upper()} unit response over (P_T, P_B): free angle and blocked moment per unit")
     return ds

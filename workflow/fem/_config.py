@@ -131,17 +131,29 @@ def write_deformed_vtu(deformed, path: str | Path) -> Path:
 
 
 def write_unit_check(nc_path: str | Path, vtu_path: str | Path, actuator: Mapping, *, rule: str = "unit_check",
-                     config_slice=None) -> None:
+                     config_slice=None, model_actuators: Mapping[str, Mapping] | None = None,
+                     attrs: Mapping | None = None) -> None:
     """Run ``unit_check`` with the config's points and write the dataset and the deformed 3D unit.
 
-    If the 3D model is not requested or its ray fails, the .vtu holds the
-    undeformed 3D mesh with zero displacement (and the dataset's status says why).
+    ``model_actuators``: a config per model (``{"2d": ..., "3d": ...}``, e.g.
+    the meshes a fidelity study chose), else ``actuator`` for all; ``attrs``
+    are added to the dataset.  If the 3D model is not requested or its ray
+    fails, the .vtu holds the undeformed 3D mesh with zero displacement (and
+    the dataset's status says why).
     """
     from ..provenance import write_dataset
 
     uc = dict(actuator.get("unit_check", {}))
     models = tuple(uc.get("models", ("2d", "3d")))
-    ds, deformed = unit_check(actuator, models, uc.get("p_top_kpa", (60.0, 180.0, 300.0)))
+    p_top = uc.get("p_top_kpa", (60.0, 180.0, 300.0))
+    if model_actuators:
+        parts = [unit_check(model_actuators.get(m, actuator), (m,), p_top) for m in models]
+        ds = xr.concat([p[0] for p in parts], dim="model")
+        deformed = next((p[1] for p in parts if p[1] is not None), None)
+        actuator = model_actuators.get("3d", actuator)
+    else:
+        ds, deformed = unit_check(actuator, models, p_top)
+    ds.attrs.update({k: str(v) for k, v in dict(attrs or {}).items()})
     write_dataset(ds, nc_path, rule=rule, config_slice=config_slice if config_slice is not None else dict(actuator),
                   title="PNA unit check: free bending angle and blocked moment at P_T = 60, 180, 300 kPa (P_B = 0)",
                   source="workflow.fem (scikit-fem, mean-dilatation Q1/P0, follower pressure, penalty contact)")

@@ -17,7 +17,7 @@ import xarray as xr
 
 from .. import doe
 from . import rsm
-from .moments import JOINTS, response_angles, response_name, responses_from_moments
+from .moments import JOINTS, parse_response, response_angles, response_name, responses_from_moments
 
 __all__ = ["patient_levels", "joint_loads"]
 
@@ -41,11 +41,16 @@ def joint_loads(
     coded_unit_sd: float = 1.0,
     prediction_alpha: float = 0.05,
     name: str = "patient",
+    direct: Mapping[tuple[str, str, float], float] | None = None,
 ) -> xr.Dataset:
     """The contract's ``joint_loads.nc`` for one patient.
 
     The response surfaces are refitted from ``moments`` (15 points, cheap and
-    exact) in the form ``rsm_ds`` selected for each response.
+    exact) in the form ``rsm_ds`` selected for each response.  ``direct``
+    ({(kind "P"/"A", joint, angle): N m}, from
+    :func:`workflow.musculoskeletal.direct.direct_responses`) replaces them by
+    the patient's own sampled moments: the prediction interval is then the
+    value itself and ``rsm_form`` says ``opensim_direct``.
     """
     finger = patient.get("finger", "F3")
     x = patient_levels(patient, anthropometry, coded_unit_sd)
@@ -63,6 +68,12 @@ def joint_loads(
     form_used = np.full(shape, "", dtype=object)
 
     def _predict(resp: str):
+        if direct is not None:
+            _, act, joint, angle = parse_response(resp)
+            key = ("P" if act < 0.5 else "A", joint, float(angle))
+            if key in direct:
+                v = float(direct[key])
+                return (v, v, v), "opensim_direct"
         if resp not in responses:
             return (np.nan, np.nan, np.nan), "missing"
         form = str(rsm_ds["form"].values[int(np.argmax(rsm_ds["selected"].sel(response=resp).values))])

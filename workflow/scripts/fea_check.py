@@ -1,12 +1,21 @@
+import xarray as xr
+
 from workflow.fea_check import write_fea_check
+from workflow.fidelity import check_choice
 from workflow.scripts._common import setup_logging
 
-setup_logging(snakemake)  # noqa: F821
+log = setup_logging(snakemake)  # noqa: F821
 p = snakemake.params  # noqa: F821
 i = snakemake.input  # noqa: F821
 o = snakemake.output  # noqa: F821
+# fidelity.auto: the coarsest mesh whose angles the check study found within the tolerance
+study = xr.load_dataset(i.check_study) if "check_study" in i.keys() else None
+h, why = check_choice(study, p.tolerance_deg, p.fea_check["h_actuator_mm"])
+log.info("FEA check mesh: h = %g mm: %s", h, why)
+fea_cfg = dict(p.fea_check, h_actuator_mm=h, h_finger_mm=h) if study is not None else p.fea_check
 write_fea_check(snakemake.wildcards.patient, p.patient, plan_nc=i.plan, joint_loads_nc=i.joint_loads,  # noqa: F821
                 moments_nc=i.moments, ccd_nc=i.ccd, out_nc=o.nc, out_vtu=list(o.vtu), out_png=o.plot,
-                fea_cfg=p.fea_check, actuator_cfg=p.actuator, cascade_cfg=p.cascade, anthropometry=p.anthropometry,
-                config_slice=p.config_slice, surrogate_2d=i.get("surrogate_2d"), surrogate_3d=i.get("surrogate_3d"),
-                unit_model_cfg=p.unit_model, rule=snakemake.rule)  # noqa: F821
+                fea_cfg=fea_cfg, actuator_cfg=p.actuator, cascade_cfg=p.cascade, anthropometry=p.anthropometry,
+                config_slice={"config": p.config_slice, "h_mm": h}, surrogate_2d=i.get("surrogate_2d"),
+                surrogate_3d=i.get("surrogate_3d"), unit_model_cfg=p.unit_model, rule=snakemake.rule,  # noqa: F821
+                notes={"fidelity": f"h = {h:g} mm", "fidelity_reason": why})

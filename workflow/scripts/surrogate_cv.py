@@ -6,4 +6,4 @@ s = snakemake.params.surrogates  # noqa: F821
 write_surrogate_cv(snakemake.input.response_2d, snakemake.input.response_3d, snakemake.output.cv,  # noqa: F821
                    k=s["k"], folds=s["folds"], random_state=s["random_state"], regressors=s["regressors"],
                    config_slice=snakemake.params.config_slice, rule=snakemake.rule,  # noqa: F821
-                   plot=snakemake.output.plot)  # noqa: F821
+                   plot=snakemake.output.plot, tolerance=snakemake.params.tolerance)  # noqa: F821

@@ -1,11 +1,17 @@
+import xarray as xr
+
 from workflow import fem
+from workflow.fidelity import apply_fem_choice
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821
-fem.write_unit_check(
-    snakemake.output.nc,  # noqa: F821
-    snakemake.output.vtu,  # noqa: F821
-    snakemake.params.actuator,  # noqa: F821
-    rule=snakemake.rule,  # noqa: F821
-    config_slice=snakemake.params.config_slice,  # noqa: F821
-)
+p = snakemake.params  # noqa: F821
+i = snakemake.input  # noqa: F821
+# fidelity.auto: each model on the mesh the FE study chose, else the config's
+choice = xr.load_dataset(i.fidelity) if "fidelity" in i.keys() else None
+per_model, attrs = {}, {}
+for m in p.actuator.get("unit_check", {}).get("models", ["2d", "3d"]):
+    per_model[m], f = apply_fem_choice(p.actuator, choice, m)
+    attrs.update({f"{k}_{m}": v for k, v in f.items()})
+fem.write_unit_check(snakemake.output.nc, snakemake.output.vtu, p.actuator, rule=snakemake.rule,  # noqa: F821
+                     config_slice={"config": p.config_slice, **attrs}, model_actuators=per_model, attrs=attrs)

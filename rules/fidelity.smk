@@ -1,0 +1,143 @@
+# Stage fidelity (issue 7 items 1 and 3): speed against accuracy of every
+# fidelity the workflow offers, and, with fidelity.auto on, the cheapest one
+# that meets the stated tolerance per stage (the sweeps and the unit check take
+# the FE mesh chosen here, the patients' loads the response surfaces or direct
+# OpenSim sampling, the FEA check its mesh). Science in workflow/fidelity.py
+# (pure), workflow/fidelity_run.py (file level), workflow/plots_fidelity.py.
+# Input functions live in rules/common.smk:
+#   FEM_CASES               -> the FE unit cases of fidelity.fem_cases (names)
+#   get_fem_choice(wc)      -> {"fidelity": results/fidelity/fem.nc} when fidelity.auto, else {}
+#   get_msk_choice(wc)      -> the musculoskeletal study (+ OpenSim model) when fidelity.auto
+#   get_check_choice(wc)    -> the patient's check study when fidelity.auto
+
+
+rule fidelity_fem:
+    input:
+        code=code_files("fidelity_run", "fem"),
+    output:
+        "results/fidelity/fem/{case}.nc",
+    wildcard_constraints:
+        case=r"fem_(2d|3d)_h[0-9.]+_(contact|nocontact)",
+    params:
+        actuator=config["actuator"],
+        p_top_kpa=config["fidelity"]["p_top_kpa"],
+        config_slice=lambda wc: {"case": wc.case, "actuator": config["actuator"],
+                                 "p_top_kpa": config["fidelity"]["p_top_kpa"]},
+    log:
+        "logs/fidelity/fidelity_fem/{case}.log",
+    benchmark:
+        "results/benchmarks/rules/fidelity_fem_{case}.tsv"
+    script:
+        "../workflow/scripts/fidelity_fem.py"
+
+
+rule fidelity_fem_choice:
+    input:
+        cases=expand("results/fidelity/fem/{case}.nc", case=FEM_CASES),
+        code=code_files("fidelity_run"),
+    output:
+        "results/fidelity/fem.nc",
+    params:
+        tolerance=config["fidelity"]["tolerance"]["fem_rel"],
+        config_slice={"fidelity": {k: config["fidelity"][k] for k in ("fem_cases", "p_top_kpa", "tolerance")}},
+    log:
+        "logs/fidelity/fidelity_fem_choice.log",
+    benchmark:
+        "results/benchmarks/rules/fidelity_fem_choice.tsv"
+    script:
+        "../workflow/scripts/fidelity_fem_choice.py"
+
+
+rule fidelity_msk:
+    input:
+        unpack(get_opensim_model),
+        ccd="results/doe/ccd.nc",
+        moments="results/musculoskeletal/moments.nc",
+        rsm="results/musculoskeletal/rsm.nc",
+        code=code_files("fidelity_run", "musculoskeletal.direct"),
+    output:
+        "results/fidelity/musculoskeletal.nc",
+    params:
+        points=config["fidelity"]["msk_points"],
+        exercises=config["exercises"],
+        scaling=config["scaling"],
+        anthropometry=config["anthropometry"],
+        config_slice=cfg("exercises", "scaling", "anthropometry", "musculoskeletal", "rsm")
+        | {"msk_points": config["fidelity"]["msk_points"]},
+    log:
+        "logs/fidelity/fidelity_msk.log",
+    benchmark:
+        "results/benchmarks/rules/fidelity_msk.tsv"
+    script:
+        "../workflow/scripts/fidelity_msk.py"
+
+
+rule fidelity_check:
+    input:
+        unpack(get_fea_surrogates),
+        plan="results/patients/{patient}/cascade_plan.nc",
+        ccd="results/doe/ccd.nc",
+        moments="results/musculoskeletal/moments.nc",
+        joint_loads="results/patients/{patient}/joint_loads.nc",
+        code=code_files("fidelity_run", "fea_check", "fea_model", "unit_model"),
+    output:
+        "results/patients/{patient}/fidelity_check.nc",
+    params:
+        patient=get_patient,
+        check=config["fidelity"]["check"],
+        fea_check=config["fea_check"],
+        actuator=config["actuator"],
+        cascade=config["cascade"],
+        anthropometry=config["anthropometry"],
+        unit_model=config["surrogates"]["unit_model"],
+        config_slice=lambda wc: {**get_fea_check_slice(wc), "check": config["fidelity"]["check"]},
+    log:
+        "logs/fidelity/fidelity_check/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/fidelity_check_{patient}.tsv"
+    script:
+        "../workflow/scripts/fidelity_check.py"
+
+
+rule speed_accuracy:
+    input:
+        unpack(get_speed_accuracy_inputs),
+        fem="results/fidelity/fem.nc",
+        response_2d="results/actuator/response_2d.nc",
+        response_3d="results/actuator/response_3d.nc",
+        cv="results/actuator/surrogate_cv.nc",
+        msk="results/fidelity/musculoskeletal.nc",
+        code=code_files("fidelity_run", "plots_fidelity"),
+    output:
+        nc="results/benchmarks/speed_accuracy.nc",
+        plot=report("results/benchmarks/speed_accuracy.png", caption="../report/speed_accuracy.rst",
+                    category="Speed and accuracy"),
+    params:
+        surrogates=config["surrogates"],
+        patient=lambda wc: config["patients"][config["cascade"]["validation_patient"]],
+        cascade=config["cascade"],
+        anthropometry=config["anthropometry"],
+        unit_model=config["surrogates"]["unit_model"],
+        config_slice=cfg("fidelity", "surrogates", "cascade"),
+    log:
+        "logs/fidelity/speed_accuracy.log",
+    benchmark:
+        "results/benchmarks/rules/speed_accuracy.tsv"
+    script:
+        "../workflow/scripts/speed_accuracy.py"
+
+
+rule speed_accuracy_table:
+    input:
+        dataset="results/benchmarks/speed_accuracy.nc",
+        code=code_files("report_tables"),
+    output:
+        report("results/report/speed_accuracy.html", caption="../report/tables.rst", category="Speed and accuracy"),
+    params:
+        table="speed_accuracy",
+    log:
+        "logs/report/speed_accuracy_table.log",
+    benchmark:
+        "results/benchmarks/rules/speed_accuracy_table.tsv"
+    script:
+        "../workflow/scripts/report_table.py"

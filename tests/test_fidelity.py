@@ -1,0 +1,139 @@
+"""Speed against accuracy and the cheapest fidelity (issue 7 items 1 and 3), on small synthetic tables."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from workflow import fidelity as FD
+from workflow.fidelity_run import fem_table
+
+
+def test_fem_case_names_round_trip_and_cases_are_listed_once():
+    c = FD.FemCase("2d", 0.5, True)
+    assert c.name == "fem_2d_h0.5_contact" and FD.FemCase.parse(c.name) == c
+    cases = FD.fem_cases([{"model": "2d", "h_mm": [2.0, 1.0], "contact": True},
+                          {"model": "2d", "h_mm": [1.0], "contact": True},
+                          {"model": "3d", "h_mm": [4.0], "contact": False}])
+    assert [x.name for x in cases] == ["fem_2d_h2_contact", "fem_2d_h1_contact", "fem_3d_h4_nocontact"]
+    with pytest.raises(ValueError, match="not an FE case"):
+        FD.FemCase.parse("fem_2d_coarse")
+
+
+def test_pareto_front_keeps_exactly_the_undominated_methods():
+    t = np.array([1.0, 2.0, 3.0, 2.5, 0.5])
+    e = np.array([0.3, 0.1, 0.05, 0.2, np.nan])
+    # 2.5 s / 0.2 is dominated by 2 s / 0.1; NaN error is never on the front
+    np.testing.assert_array_equal(FD.pareto_front(t, e), [True, True, True, False, False])
+    # ties: equal on both is not domination
+    np.testing.assert_array_equal(FD.pareto_front(np.array([1.0, 1.0]), np.array([0.1, 0.1])), [True, True])
+
+
+def test_cheapest_within_tolerance_else_the_most_accurate():
+    names = ["coarse", "mid", "fine"]
+    ch = FD.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.2, 0.05, 0.0], 0.1)
+    assert ch.method == "mid" and ch.met_tolerance and "coarse" in ch.reason  # the faster one outside is named
+    ch = FD.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.2, 0.05, 0.0], 0.1, converged=[True, False, True])
+    assert ch.method == "fine"  # a method that did not converge is never taken
+    ch = FD.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.5, 0.3, np.nan], 0.1)
+    assert ch.method == "mid" and not ch.met_tolerance and "no method within" in ch.reason
+
+
+def _case(name, angles, moments, wall=1.0, status=(0, 0, 0)):
+    p = np.array([60.0, 180.0, 300.0])
+    st = np.array([[s, s] for s in status])
+    return xr.Dataset(
+        {"bending_angle_deg": ("p_top_kpa", np.asarray(angles, float)),
+         "bending_moment_nm": ("p_top_kpa", np.asarray(moments, float)),
+         "status": (("p_top_kpa", "case"), st), "case_wall_time_s": ((), wall)},
+        coords={"p_top_kpa": p, "case": ["free", "blocked"]}, attrs={"case": name})
+
+
+def test_fem_table_measures_every_case_against_the_finest_converged_case_with_contact():
+    cases = [
+        _case("fem_2d_h2_contact", [8, 20, 28], [0.05, 0.12, 0.20], wall=1),
+        _case("fem_2d_h1_contact", [9, 21, 30], [0.05, 0.13, np.nan], wall=4, status=(0, 0, 1)),
+        _case("fem_2d_h2_nocontact", [8, 18, 21], [0.05, 0.10, 0.14], wall=0.5),
+        _case("fem_3d_h4_contact", [3, 6, 9], [0.02, 0.07, 0.12], wall=10),
+    ]
+    t = fem_table(cases)
+    e = t["error"]
+    # angle_300: the 1 mm case is the reference; 2 mm is 28/30 - 1 off
+    assert float(e.sel(case="fem_2d_h1_contact", quantity="angle_300")) == 0.0
+    assert float(e.sel(case="fem_2d_h2_contact", quantity="angle_300")) == pytest.approx(2 / 30)
+    assert float(e.sel(case="fem_2d_h2_nocontact", quantity="angle_300")) == pytest.approx(9 / 30)
+    # moment_300: 1 mm did not get there, so 2 mm is the finest that did (its own reference)
+    assert str(t["reference_case"].sel(case="fem_2d_h2_nocontact", quantity="moment_300").values) == "fem_2d_h2_contact"
+    assert np.isnan(float(e.sel(case="fem_2d_h1_contact", quantity="moment_300")))
+    # 3D has its own reference, never the 2D one
+    assert float(e.sel(case="fem_3d_h4_contact", quantity="angle_60")) == 0.0
+    assert not bool(t["converged"].sel(case="fem_2d_h1_contact"))
+
+
+def test_fem_choice_picks_the_cheapest_case_within_tolerance(tmp_path):
+    from workflow.fidelity_run import write_fem_choice
+
+    files = []
+    for c in (_case("fem_2d_h2_contact", [8, 20, 28], [0.05, 0.12, 0.20], wall=1),
+              _case("fem_2d_h1_contact", [8.5, 21, 29.5], [0.05, 0.13, 0.21], wall=4),
+              _case("fem_2d_h0.5_contact", [8.6, 21.3, 30], [0.051, 0.13, 0.21], wall=20)):
+        path = tmp_path / f"{c.attrs['case']}.nc"
+        c.to_netcdf(path)
+        files.append(path)
+    ds = write_fem_choice(files, tmp_path / "fem.nc", tolerance=0.03, config_slice={})
+    assert str(ds["chosen_case"].sel(model_choice="2d").values) == "fem_2d_h1_contact"
+    act, attrs = FD.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}, "contact": {"enabled": False}}, ds, "2d")
+    assert act["mesh"]["h_2d_mm"] == 1.0 and act["contact"]["enabled"] is True
+    assert attrs["fidelity"] == "fem_2d_h1_contact" and "within" in attrs["fidelity_reason"]
+    act, attrs = FD.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}}, None, "2d")
+    assert act["mesh"]["h_2d_mm"] == 2.0 and attrs["fidelity"] == "config"
+
+
+def test_check_choice_takes_the_coarsest_mesh_whose_angles_stay_close():
+    study = xr.Dataset({"angle_deg": (("h_mm", "joint"), [[30.0, 10, 0], [37.0, 12, 0], [38.0, 12.5, 0], [38.5, 12.6, 0]]),
+                        "status": ("h_mm", [0, 0, 0, 0]), "wall_time_s": ("h_mm", [10.0, 20, 40, 90])},
+                       coords={"h_mm": [3.0, 2.5, 2.0, 1.5]}, attrs={"exercise": "TGE2"})
+    h, why = FD.check_choice(study, 2.0, 2.0)
+    assert h == 2.5 and "TGE2" in why
+    h, _ = FD.check_choice(None, 2.0, 1.75)
+    assert h == 1.75
+
+
+def test_loads_method_trusts_the_surfaces_only_where_the_study_found_them_accurate():
+    from workflow.musculoskeletal.direct import loads_method
+
+    study = xr.Dataset({"rel_error": (("method", "point", "quantity"), np.array([[[0.01], [0.30]], [[0.0], [0.0]]])),
+                        "wall_time_s": (("method", "point"), [[0.01, 0.01], [2.0, 2.0]]),
+                        "inside_design": ("point", [True, False])},
+                       coords={"method": ["msk_rsm_selected", "msk_opensim"]})
+    m, why = loads_method(study, {"depth": 0.1, "length": 0.2, "breadth": 0.0}, 0.05, model_available=True)
+    assert m == "rsm" and "inside" in why
+    m, why = loads_method(study, {"depth": 1.5, "length": 0.0, "breadth": 0.0}, 0.05, model_available=True)
+    assert m == "opensim_direct" and "outside" in why
+    m, _ = loads_method(study, {"depth": 1.5, "length": 0.0, "breadth": 0.0}, 0.05, model_available=False)
+    assert m == "rsm"
+
+
+def test_regressor_choice_with_a_tolerance_takes_the_fastest_good_enough():
+    from workflow.surrogates import select_regressor
+
+    regs, targets, folds = ["knn", "rbf", "gp"], ["angle", "moment"], 2
+    rmse = np.array([0.2, 0.02, 0.01])[:, None, None] * np.ones((3, 2, folds))
+    pt = np.array([1e-4, 1e-3, 1e-2])[:, None, None] * np.ones((3, 2, folds))
+    cv = xr.Dataset({"rmse": (("regressor", "target", "fold"), rmse),
+                     "predict_time_s": (("regressor", "target", "fold"), pt),
+                     "target_std": ("target", [1.0, 1.0])},
+                    coords={"regressor": regs, "target": targets, "fold": np.arange(folds)})
+    assert select_regressor(cv)[0] == "gp"  # the best score without a tolerance
+    best, _, why = select_regressor(cv, tolerance=0.05)
+    assert best == "rbf" and "knn" in why
+
+
+def test_speed_accuracy_dataset_marks_the_front_per_quantity():
+    ds = FD.speed_accuracy_dataset(["a", "b", "c"], ["q1", "q2"], [1.0, 2.0, 3.0],
+                                   np.array([[0.5, 0.1], [0.2, 0.3], [0.0, np.nan]]), family=["x"] * 3,
+                                   error_units={"q1": "1", "q2": "kPa"}, reference={"q1": "c", "q2": "a"})
+    np.testing.assert_array_equal(ds["pareto"].sel(quantity="q1").values, [True, True, True])
+    np.testing.assert_array_equal(ds["pareto"].sel(quantity="q2").values, [True, False, False])
+    assert str(ds["error_units"].sel(quantity="q2").values) == "kPa"

@@ -1,0 +1,236 @@
+"""Speed against accuracy, and the cheapest fidelity that meets a tolerance (issue 7 items 1 and 3).
+
+Pure functions on small tables; the FE solves, surrogate fits and OpenSim
+samples that feed them live in :mod:`workflow.fidelity_run`.
+
+Vocabulary
+----------
+* A *method* is one fidelity of one stage: an FE unit model at one element
+  size with or without contact (``fem_2d_h1_contact``), a surrogate
+  (``surrogate_3d_rbf``), a plan made with one surrogate (``plan_3d_knn``),
+  the finger-actuator FEA check at one mesh (``check_h2``) or the
+  reduced-order chain standing in for it (``check_chain_3d``), a response
+  surface or direct OpenSim sampling (``msk_rsm_quadratic``, ``msk_opensim``).
+* A *quantity* is what is compared across methods: the unit's free angle and
+  blocked moment at P_T = 60, 180, 300 kPa (P_B = 0), the planned pressures of
+  an exercise, the joint angles the check reaches, a joint moment at a target
+  angle.
+* The *reference* of a quantity is the finest method that produced it (the
+  finest converged mesh; see each builder).  ``error`` is relative
+  (``|m - ref| / |ref|``) for the unit quantities and the moments, in kPa (RMS
+  over the eight chamber pressures) for plans and in degrees (largest over the
+  three joints) for the check; a method has no error on its own reference
+  point (NaN) unless it is the reference itself (0).
+* *Pareto*: a method is on the front of a quantity when no other method is
+  both at least as fast and at least as accurate, and better in one.
+
+Units: wall time s, pressures kPa, angles deg, moments N m.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+__all__ = [
+    "UNIT_QUANTITIES",
+    "FemCase",
+    "fem_cases",
+    "unit_quantities",
+    "relative_errors",
+    "pareto_front",
+    "speed_accuracy_dataset",
+    "Choice",
+    "cheapest_within",
+    "case_actuator",
+    "apply_fem_choice",
+    "check_choice",
+]
+
+#: The unit quantities of the FE and surrogate methods (P_B = 0).
+UNIT_QUANTITIES = tuple(f"{q}_{p}" for q in ("angle", "moment") for p in (60, 180, 300))
+
+
+@dataclass(frozen=True)
+class FemCase:
+    """One FE unit fidelity: model (``2d``/``3d``), element size (mm), self-contact."""
+
+    model: str
+    h_mm: float
+    contact: bool
+
+    @property
+    def name(self) -> str:
+        return f"fem_{self.model}_h{self.h_mm:g}_{'contact' if self.contact else 'nocontact'}"
+
+    @classmethod
+    def parse(cls, name: str) -> "FemCase":
+        m = re.fullmatch(r"fem_(2d|3d)_h([0-9.]+)_(contact|nocontact)", name)
+        if m is None:
+            raise ValueError(f"not an FE case name: {name!r} (expected e.g. fem_2d_h1_contact)")
+        return cls(m.group(1), float(m.group(2)), m.group(3) == "contact")
+
+
+def fem_cases(spec: Sequence[Mapping]) -> list[FemCase]:
+    """Cases of the config list ``[{model, h_mm: [...], contact}, ...]``, each once, in order."""
+    out: list[FemCase] = []
+    for s in spec:
+        for h in s["h_mm"]:
+            c = FemCase(str(s["model"]), float(h), bool(s["contact"]))
+            if c not in out:
+                out.append(c)
+    return out
+
+
+def unit_quantities(angle_deg: Sequence[float], moment_nm: Sequence[float], p_top_kpa: Sequence[float]) -> dict[str, float]:
+    """{``angle_60``: ..., ``moment_300``: ...} from values at the study pressures (NaN where not reached)."""
+    out = {q: np.nan for q in UNIT_QUANTITIES}
+    for a, m, p in zip(angle_deg, moment_nm, p_top_kpa):
+        out[f"angle_{int(round(p))}"] = float(a)
+        out[f"moment_{int(round(p))}"] = float(m)
+    return out
+
+
+def relative_errors(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """|v - ref| / |ref| elementwise (NaN where either is NaN or ref is 0)."""
+    v, r = np.asarray(values, float), np.asarray(reference, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e = np.abs(v - r) / np.abs(r)
+    return np.where(np.isfinite(e), e, np.nan)
+
+
+def pareto_front(wall_time_s: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """Boolean mask of the methods no other method dominates (time and error both <=, one <).
+
+    Methods with a NaN error are never on the front.
+    """
+    t, e = np.asarray(wall_time_s, float), np.asarray(error, float)
+    ok = np.isfinite(t) & np.isfinite(e)
+    front = np.zeros(t.size, bool)
+    for i in np.flatnonzero(ok):
+        dom = ok & (t <= t[i]) & (e <= e[i]) & ((t < t[i]) | (e < e[i]))
+        front[i] = not dom.any()
+    return front
+
+
+def speed_accuracy_dataset(methods: Sequence[str], quantities: Sequence[str], wall_time_s: Sequence[float],
+                           error: np.ndarray, *, family: Sequence[str], error_units: Mapping[str, str],
+                           reference: Mapping[str, str], value: np.ndarray | None = None,
+                           setup_time_s: Sequence[float] | None = None, notes: Mapping[str, str] | None = None
+                           ) -> xr.Dataset:
+    """The contract's ``speed_accuracy.nc``: ``wall_time_s`` (method), ``error`` and ``pareto`` (method, quantity).
+
+    ``error_units`` / ``reference``: per quantity, the error's unit and the
+    reference method's name; ``value`` (method, quantity) the compared values;
+    ``setup_time_s`` (method) a one-off cost behind a method's query time (a
+    surrogate's sweep and fit).
+    """
+    err = np.asarray(error, float)
+    t = np.asarray(wall_time_s, float)
+    par = np.stack([pareto_front(t, err[:, j]) for j in range(err.shape[1])], axis=1) if err.size else err.astype(bool)
+    ds = xr.Dataset(
+        {
+            "wall_time_s": ("method", t, {"units": "s", "long_name": "wall time of the method for its quantities"}),
+            "error": (("method", "quantity"), err, {"units": "see error_units", "long_name": "error against the quantity's reference"}),
+            "pareto": (("method", "quantity"), par, {"units": "1", "long_name": "on the speed-accuracy Pareto front of the quantity"}),
+            "family": ("method", np.array(list(family), dtype=object), {"units": "1", "long_name": "stage and kind of the method"}),
+            "error_units": ("quantity", np.array([error_units[q] for q in quantities], dtype=object), {"units": "1", "long_name": "unit of the error (1 = relative)"}),
+            "reference_method": ("quantity", np.array([reference.get(q, "") for q in quantities], dtype=object), {"units": "1", "long_name": "method taken as the reference"}),
+        },
+        coords={"method": list(methods), "quantity": list(quantities)},
+    )
+    if value is not None:
+        ds["value"] = (("method", "quantity"), np.asarray(value, float), {"units": "mixed", "long_name": "the compared value (deg, N m, kPa RMS, deg)"})
+    if setup_time_s is not None:
+        ds["setup_time_s"] = ("method", np.asarray(setup_time_s, float), {"units": "s", "long_name": "one-off cost behind the method (e.g. a surrogate's sweep and fit)"})
+    ds.attrs.update({k: str(v) for k, v in dict(notes or {}).items()})
+    return ds
+
+
+@dataclass
+class Choice:
+    """The fidelity picked for one stage, and why."""
+
+    stage: str
+    method: str
+    reason: str
+    error: float
+    wall_time_s: float
+    met_tolerance: bool
+
+
+def cheapest_within(stage: str, methods: Sequence[str], wall_time_s: Sequence[float], error: Sequence[float],
+                    tolerance: float, *, converged: Sequence[bool] | None = None, unit: str = "") -> Choice:
+    """The cheapest converged method whose error (its largest over the stage's quantities) is within ``tolerance``.
+
+    If none is, the most accurate converged one, said so.  ``error`` NaN
+    counts as unknown: such a method is only taken when it is the reference
+    (error 0 is expected there) -- callers pass 0 for the reference.
+    """
+    t = np.asarray(wall_time_s, float)
+    e = np.asarray(error, float)
+    ok = np.ones(t.size, bool) if converged is None else np.asarray(converged, bool)
+    within = ok & np.isfinite(e) & (e <= tolerance)
+    u = f" {unit}" if unit and unit != "1" else ""
+    fmt = (lambda x: f"{x:.3g}{u}") if u else (lambda x: f"{100 * x:.2f} %")
+    if within.any():
+        i = int(np.flatnonzero(within)[np.argmin(t[within])])
+        faster = ok & (t < t[i])
+        why = (f"{methods[i]}: the cheapest ({t[i]:.1f} s) within {fmt(tolerance)} (its error {fmt(e[i])})"
+               + (f"; faster but outside: {', '.join(f'{methods[k]} {fmt(e[k])}' for k in np.flatnonzero(faster))}"
+                  if faster.any() else ""))
+        return Choice(stage, methods[i], why, float(e[i]), float(t[i]), True)
+    cand = ok & np.isfinite(e)
+    if not cand.any():
+        raise ValueError(f"{stage}: no converged method with a known error to choose from")
+    i = int(np.flatnonzero(cand)[np.argmin(e[cand])])
+    return Choice(stage, methods[i], f"{methods[i]}: no method within {fmt(tolerance)}; the most accurate "
+                  f"converged one taken (error {fmt(e[i])}, {t[i]:.1f} s)", float(e[i]), float(t[i]), False)
+
+
+def case_actuator(actuator: Mapping, case: FemCase) -> dict:
+    """The ``actuator`` config with the case's element size and contact switch."""
+    mesh = dict(actuator.get("mesh", {}), **{f"h_{case.model}_mm": float(case.h_mm)})
+    contact = dict(actuator.get("contact", {}), enabled=bool(case.contact))
+    return dict(actuator, mesh=mesh, contact=contact)
+
+
+def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -> tuple[dict, dict]:
+    """(``actuator`` config with the chosen mesh and contact for ``model``, the fidelity attrs to record).
+
+    ``choice``: the FE study's choice (``results/fidelity/fem.nc``); without it
+    (``fidelity.auto`` off) the config's own mesh is used and said so.
+    """
+    act = dict(actuator)
+    if choice is None:
+        h_cfg = dict(act.get("mesh", {})).get(f"h_{model}_mm")
+        return act, {"fidelity": "config", "fidelity_reason": f"actuator.mesh.h_{model}_mm = {h_cfg} (fidelity.auto off)"}
+    row = choice.sel(model_choice=model)
+    case = FemCase(model, float(row["chosen_h_mm"]), bool(row["chosen_contact"]))
+    return case_actuator(act, case), {"fidelity": case.name, "fidelity_reason": str(row["choice_reason"].values)}
+
+
+def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: float) -> tuple[float, str]:
+    """(element size, why) for the FEA check: the cheapest mesh whose joint angles are within
+    ``tolerance_deg`` of the finest converged one in the check study (the config's without a study).
+
+    ``study``: the dataset of :func:`workflow.fidelity_run.write_check_study`.
+    """
+    if study is None:
+        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g} (fidelity.auto off)"
+    c = study
+    hs, ang = c["h_mm"].values, c["angle_deg"].values
+    ok = c["status"].values == 0
+    wall = c["wall_time_s"].values
+    ex = str(c.attrs.get("exercise", ""))
+    if not ok.any():
+        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g}: no mesh of the check study converged"
+    r = int(np.flatnonzero(ok)[np.argmin(hs[ok])])
+    err = np.where(ok, np.max(np.abs(ang - ang[r]), axis=1), np.nan)
+    ch = cheapest_within("fea_check", [f"check_h{h:g}" for h in hs], wall, err, tolerance_deg, converged=ok,
+                            unit="deg")
+    return float(hs[[f"check_h{h:g}" for h in hs].index(ch.method)]), f"{ch.reason} (study: {ex}, finest h = {hs[r]:g} mm)"

@@ -1,0 +1,500 @@
+"""File-level entry points of the fidelity stage (issue 7 items 1 and 3).
+
+* :func:`write_fem_case` -- one FE unit fidelity (model, element size,
+  contact): free angle and blocked moment at P_T = 60/180/300 kPa, with its
+  wall time (the unit check's rays, :func:`workflow.fem.unit_check`);
+* :func:`write_fem_choice` -- all cases against the finest converged one of
+  their model, and the cheapest case per model within the tolerance (what the
+  sweeps and the unit check then use when ``fidelity.auto`` is on);
+* :func:`write_msk_study` -- response surfaces against direct OpenSim
+  sampling at test patients, inside and outside the design region;
+* :func:`write_check_study` -- the finger-actuator FEA check of one exercise
+  at several meshes, against the reduced-order chains;
+* :func:`write_speed_accuracy` -- everything on one (method, quantity) table
+  with the Pareto fronts and the chart.
+
+Units: s, kPa, deg, N m, mm.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+from workflow import fidelity as FD
+from workflow.provenance import write_dataset
+
+__all__ = ["write_fem_case", "fem_table", "write_fem_choice", "write_msk_study",
+           "write_check_study", "write_speed_accuracy"]
+
+log = logging.getLogger(__name__)
+
+P_STUDY = (60.0, 180.0, 300.0)
+
+
+# --------------------------------------------------------------------------
+# FE unit: one case, the table, the choice
+# --------------------------------------------------------------------------
+def write_fem_case(case_name: str, out: str | Path, *, actuator: Mapping[str, Any], config_slice: Any,
+                   p_top_kpa: Sequence[float] = P_STUDY, rule: str = "fidelity_fem") -> xr.Dataset:
+    """Rule ``fidelity_fem``: the unit check of one case -> ``results/fidelity/fem/{case}.nc``."""
+    from workflow import fem
+
+    case = FD.FemCase.parse(case_name)
+    t0 = time.perf_counter()
+    ds, _ = fem.unit_check(FD.case_actuator(actuator, case), (case.model,), p_top_kpa)
+    wall = time.perf_counter() - t0
+    ds = ds.squeeze("model", drop=True)
+    ds["case_wall_time_s"] = ((), wall, {"units": "s", "long_name": "wall time of both rays (free, blocked), retries included"})
+    ds.attrs.update({"case": case.name, "model": case.model, "h_mm": case.h_mm, "contact": int(case.contact)})
+    log.info("%s: free %s deg, blocked %s N m, status %s, %.1f s", case.name,
+             np.round(ds["bending_angle_deg"].values, 3), np.round(ds["bending_moment_nm"].values, 4),
+             ds["status"].values.ravel().tolist(), wall)
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title=f"FE unit fidelity {case.name}: free angle and blocked moment at P_T = 60/180/300 kPa")
+    return ds
+
+
+def fem_table(cases: Sequence[xr.Dataset]) -> xr.Dataset:
+    """The cases on one table (case, quantity) with errors against each model's finest converged case.
+
+    Reference per model and quantity: the finest mesh *with contact* that
+    reached that point (contact is part of the physics; cases without it are
+    compared with it).  ``error`` = relative error; NaN where the case did
+    not reach the point or is itself the only one that did.
+    """
+    names = [str(c.attrs["case"]) for c in cases]
+    parsed = [FD.FemCase.parse(n) for n in names]
+    vals = np.full((len(cases), len(FD.UNIT_QUANTITIES)), np.nan)
+    for i, c in enumerate(cases):
+        q = FD.unit_quantities(c["bending_angle_deg"].values, c["bending_moment_nm"].values, c["p_top_kpa"].values)
+        vals[i] = [q[k] for k in FD.UNIT_QUANTITIES]
+    err = np.full_like(vals, np.nan)
+    ref_name = np.full(vals.shape, "", dtype=object)
+    for model in sorted({c.model for c in parsed}):
+        rows = [i for i, c in enumerate(parsed) if c.model == model]
+        for j in range(vals.shape[1]):
+            cands = [i for i in rows if parsed[i].contact and np.isfinite(vals[i, j])]
+            if not cands:
+                continue
+            r = min(cands, key=lambda i: parsed[i].h_mm)
+            for i in rows:
+                ref_name[i, j] = names[r]
+                if i == r:
+                    err[i, j] = 0.0
+                elif parsed[i].contact and parsed[i].h_mm <= parsed[r].h_mm:
+                    continue  # a finer case the reference could not be compared with
+                else:
+                    err[i, j] = FD.relative_errors(vals[i, j], vals[r, j])
+    wall = np.array([float(c["case_wall_time_s"]) for c in cases])
+    conv = np.array([bool(np.all(c["status"].values == 0)) for c in cases])
+    return xr.Dataset(
+        {
+            "value": (("case", "quantity"), vals, {"units": "deg or N m", "long_name": "free angle per unit (angle_*) / blocked moment per unit (moment_*), P_B = 0"}),
+            "error": (("case", "quantity"), err, {"units": "1", "long_name": "relative error against the model's finest converged case with contact"}),
+            "reference_case": (("case", "quantity"), ref_name, {"units": "1", "long_name": "case taken as the reference"}),
+            "wall_time_s": ("case", wall, {"units": "s", "long_name": "wall time of the case (free and blocked rays)"}),
+            "converged": ("case", conv, {"units": "1", "long_name": "every study point reached in both rays"}),
+            "model": ("case", np.array([c.model for c in parsed], dtype=object), {"units": "1", "long_name": "2d or 3d"}),
+            "h_mm": ("case", np.array([c.h_mm for c in parsed]), {"units": "mm", "long_name": "element size"}),
+            "contact": ("case", np.array([c.contact for c in parsed]), {"units": "1", "long_name": "self-contact across the gaps"}),
+        },
+        coords={"case": names, "quantity": list(FD.UNIT_QUANTITIES)},
+    )
+
+
+def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, tolerance: float, config_slice: Any,
+                     rule: str = "fidelity_fem_choice") -> xr.Dataset:
+    """Rule ``fidelity_fem_choice``: the table and, per model, the cheapest case within ``tolerance``.
+
+    A case's error is its largest over the six quantities where it has one;
+    it must have reached every point.  The reference itself has error 0.
+    """
+    table = fem_table([xr.load_dataset(f) for f in case_files])
+    models = sorted(set(table["model"].values.tolist()))
+    chosen, reason, h, contact, met = [], [], [], [], []
+    for model in models:
+        sel = table.where(table["model"] == model, drop=True)
+        names = [str(n) for n in sel["case"].values]
+        worst = sel["error"].max("quantity", skipna=True).values
+        conv = sel["converged"].values.astype(bool)
+        ch = FD.cheapest_within(f"fem_{model}", names, sel["wall_time_s"].values, worst, tolerance, converged=conv)
+        case = FD.FemCase.parse(ch.method)
+        chosen.append(ch.method)
+        reason.append(ch.reason)
+        h.append(case.h_mm)
+        contact.append(case.contact)
+        met.append(ch.met_tolerance)
+        log.info("FE %s: %s", model, ch.reason)
+    ds = table.assign(
+        chosen_case=("model_choice", np.array(chosen, dtype=object), {"units": "1", "long_name": "FE case the sweeps and the unit check use"}),
+        chosen_h_mm=("model_choice", np.array(h), {"units": "mm", "long_name": "chosen element size"}),
+        chosen_contact=("model_choice", np.array(contact), {"units": "1", "long_name": "chosen contact switch"}),
+        choice_reason=("model_choice", np.array(reason, dtype=object), {"units": "1", "long_name": "why this case"}),
+        tolerance_met=("model_choice", np.array(met), {"units": "1", "long_name": "the chosen case is within the tolerance"}),
+    ).assign_coords(model_choice=models)
+    ds.attrs["tolerance"] = float(tolerance)
+    ds.attrs["rule_of_choice"] = ("cheapest converged case whose largest relative error over the unit's free angle "
+                                  "and blocked moment at P_T = 60/180/300 kPa is within the tolerance")
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title="FE unit fidelities: speed and error per element size and contact, and the choice")
+    return ds
+
+
+# --------------------------------------------------------------------------
+# Musculoskeletal: response surfaces against direct OpenSim sampling
+# --------------------------------------------------------------------------
+def _msk_quantities(exercises: Mapping[str, Mapping[str, float]], finger: str) -> list[tuple[str, str, str, str, float]]:
+    """(quantity, response name, kind P/A, joint, angle) for every passive target and active limit."""
+    from workflow.musculoskeletal.moments import ACTIVATIONS, JOINTS, response_angles, response_name
+
+    out = []
+    angles = response_angles(exercises)
+    for kind in ("P", "A"):
+        for joint in JOINTS:
+            for a in angles[kind][joint]:
+                out.append((f"{'passive' if kind == 'P' else 'active'}_{joint}_{a:g}",
+                            response_name(finger, ACTIVATIONS[kind], joint, a), kind, joint, float(a)))
+    return out
+
+
+def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: str, model_osim: str | None,
+                    points: Sequence[Mapping[str, float]], exercises: Mapping, scaling_cfg: Mapping,
+                    anthropometry: Mapping, finger: str, config_slice: Any, rule: str = "fidelity_msk") -> xr.Dataset:
+    """Rule ``fidelity_msk``: each RSM form, and the selected one per response, against direct sampling.
+
+    At test patients given by coded levels, inside and outside the design
+    region.  Direct sampling (:mod:`workflow.musculoskeletal.direct`) is the
+    reference.  Without a model (``table`` backend) only the RSM forms are
+    timed and no error can be given (said so in the dataset and the log).
+    Errors compare magnitudes (the active moments' sign is a backend convention).
+    """
+    from workflow import doe
+    from workflow.musculoskeletal import rsm
+    from workflow.musculoskeletal.moments import responses_from_moments
+    from workflow.pipeline import design_from_ccd
+
+    design = design_from_ccd(ccd_nc)
+    responses = responses_from_moments(xr.load_dataset(moments_nc), exercises)
+    rsm_ds = xr.load_dataset(rsm_nc)
+    quants = [q for q in _msk_quantities(exercises, finger) if q[1] in responses]
+    forms = [str(f) for f in rsm_ds["form"].values]
+    selected = {q[1]: forms[int(np.argmax(rsm_ds["selected"].sel(response=q[1]).values))] for q in quants}
+    pts = [{k: float(p[k]) for k in doe.FACTORS} for p in points]
+    norm = np.array([np.linalg.norm([p[k] for k in doe.FACTORS]) for p in pts])
+    methods = [f"msk_rsm_{f}" for f in forms] + ["msk_rsm_selected", "msk_opensim"]
+    vals = np.full((len(methods), len(pts), len(quants)), np.nan)
+    wall = np.full((len(methods), len(pts)), np.nan)
+    setup = np.zeros(len(methods))
+    for m, form in enumerate(forms + ["selected"]):
+        t0 = time.perf_counter()  # the surfaces are fitted once (the rsm rule's job), then queried per patient
+        fits = [rsm.fit_response(design, responses[resp], selected[resp] if form == "selected" else form)
+                for _, resp, *_rest in quants]
+        setup[m] = time.perf_counter() - t0
+        for i, x in enumerate(pts):
+            t0 = time.perf_counter()
+            vals[m, i] = [rsm.predict(f, x)[0] for f in fits]
+            wall[m, i] = time.perf_counter() - t0
+    note = "direct OpenSim sampling at each test patient (reference)"
+    if model_osim:
+        from workflow.musculoskeletal.direct import direct_responses
+
+        for i, x in enumerate(pts):
+            t0 = time.perf_counter()
+            d = direct_responses(model_osim, x, exercises, finger=finger, scaling_cfg=scaling_cfg,
+                                 anthropometry=anthropometry)
+            vals[-1, i] = [d[kind, joint, a] for _, _, kind, joint, a in quants]
+            wall[-1, i] = time.perf_counter() - t0
+            log.info("direct OpenSim at %s: %.2f s", x, wall[-1, i])
+    else:
+        note = "no OpenSim model (table backend): direct sampling not available, errors unknown"
+        log.warning("fidelity_msk: %s", note)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        err = np.abs(np.abs(vals) - np.abs(vals[-1][None])) / np.abs(vals[-1][None])
+    inside = norm <= 1 + 1e-9
+    ds = xr.Dataset(
+        {
+            "moment_nm": (("method", "point", "quantity"), vals, {"units": "N m", "long_name": "joint moment at the target angle"}),
+            "rel_error": (("method", "point", "quantity"), err, {"units": "1", "long_name": "relative error of the magnitude against direct sampling"}),
+            "wall_time_s": (("method", "point"), wall, {"units": "s", "long_name": "time to give one patient's moments (RSM: predict with intervals; OpenSim: scale + sample)"}),
+            "setup_time_s": ("method", setup, {"units": "s", "long_name": "one-off cost (RSM: fitting the surfaces; OpenSim: 0, the model build is the CCD's)"}),
+            "coded": (("point", "dimension"), np.array([[p[k] for k in doe.FACTORS] for p in pts]), {"units": "1", "long_name": "coded levels of the test patient"}),
+            "coded_norm": ("point", norm, {"units": "1", "long_name": "||x|| of the test patient"}),
+            "inside_design": ("point", inside, {"units": "1", "long_name": "||x|| <= 1"}),
+        },
+        coords={"method": methods, "point": np.arange(len(pts)), "quantity": [q[0] for q in quants],
+                "dimension": list(doe.FACTORS)},
+    )
+    ds.attrs.update({"finger": finger, "reference": "msk_opensim", "note": note})
+    for m in methods[:-1]:
+        e = ds["rel_error"].sel({"method": m})
+        log.info("%s: largest relative error inside %.3g, outside %.3g", m,
+                 float(e.where(ds["inside_design"]).max()), float(e.where(~ds["inside_design"]).max()))
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title="Response surfaces against direct OpenSim sampling at test patients")
+    return ds
+
+
+# --------------------------------------------------------------------------
+# The FEA check at several meshes, against the reduced-order chains
+# --------------------------------------------------------------------------
+def write_check_study(out: str | Path, *, exercise: str, h_mm: Sequence[float], patient_name: str,
+                      patient: Mapping, plan_nc: str, joint_loads_nc: str, moments_nc: str, ccd_nc: str,
+                      surrogate_2d: str, surrogate_3d: str, fea_cfg: Mapping, actuator_cfg: Mapping,
+                      cascade_cfg: Mapping, anthropometry: Mapping, unit_model_cfg: Mapping, config_slice: Any,
+                      rule: str = "fidelity_check") -> xr.Dataset:
+    """Rule ``fidelity_check``: one exercise's FEA check at each element size (actuator = finger h).
+
+    Joint angles, wall time (gravity + pressure phases), DOFs and status per
+    mesh; the chains' predictions (the plan's and the 2D unit's at the
+    applied pressures) with their planning time as the cheap stand-ins.
+    """
+    from workflow.cascade import patient_cascade, patient_finger, solve_equilibrium
+    from workflow.fea_check import check_exercise, gravity_state, load_surrogate_angles, pressures_2d
+    from workflow.fea_model import build_patient_fea
+    from workflow.finger import JOINTS
+    from workflow.unit_model import load_unit_model
+
+    plan = xr.load_dataset(plan_nc)
+    loads = xr.load_dataset(joint_loads_nc)
+    finger, _ = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+                               cascade_cfg=cascade_cfg, anthropometry=anthropometry)
+    upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
+    a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d)
+    p3 = plan["pressure_kpa"].sel(exercise=exercise).values
+    p2, _ = pressures_2d(p3, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
+    solver = dict(actuator_cfg.get("solver", {}))
+    solver.update(dict(fea_cfg.get("solver", {})))
+    hs = sorted((float(h) for h in h_mm), reverse=True)
+    ang = np.full((len(hs), 3), np.nan)
+    wall, ndofs, status = np.full(len(hs), np.nan), np.zeros(len(hs), dtype="i4"), np.zeros(len(hs), dtype="i1")
+    for i, h in enumerate(hs):
+        t0 = time.perf_counter()
+        fea = build_patient_fea(finger, upg, actuator_cfg=actuator_cfg, cascade_cfg=cascade_cfg,
+                                reference_dims_mm={k: float(v["mean"]) for k, v in anthropometry["measures"].items()},
+                                fea_cfg=dict(fea_cfg, h_actuator_mm=h, h_finger_mm=h))
+        grav = gravity_state(fea, solver)
+        c = check_exercise(fea, exercise, p2, solver, gravity=grav) if grav.status == 0 else None
+        wall[i] = time.perf_counter() - t0
+        res = c.result if c is not None else grav
+        ang[i] = c.angle_deg if c is not None else grav.joint_angles_deg
+        ndofs[i], status[i] = res.ndofs, res.status if c is not None else max(1, grav.status)
+        log.info("check %s at h = %g mm (%d dofs): %s deg, status %d, %.1f s", exercise, h, ndofs[i],
+                 np.round(ang[i], 2), status[i], wall[i])
+    chains = {}
+    for name, path, p in (("check_chain_plan", {"2d": surrogate_2d, "3d": surrogate_3d}[cascade_cfg.get("surrogate", "3d")], p3),
+                          ("check_chain_2d", surrogate_2d, p2)):
+        t0 = time.perf_counter()
+        ro = patient_cascade(finger, load_unit_model(path, **unit_model_cfg), cascade_cfg, upg)
+        eq = solve_equilibrium(ro, np.asarray(p).ravel())
+        chains[name] = (eq.joint_angles_deg, time.perf_counter() - t0)
+    ds = xr.Dataset(
+        {
+            "angle_deg": (("h_mm", "joint"), ang, {"units": "degree", "long_name": "joint angle reached in the FEA check"}),
+            "wall_time_s": ("h_mm", wall, {"units": "s", "long_name": "model build, gravity and pressure phases"}),
+            "ndofs": ("h_mm", ndofs, {"units": "1", "long_name": "degrees of freedom"}),
+            "status": ("h_mm", status, {"units": "1", "long_name": "solver status (0 = converged)"}),
+            "chain_angle_deg": (("chain", "joint"), np.array([v[0] for v in chains.values()]), {"units": "degree", "long_name": "reduced-order chain's joint angle"}),
+            "chain_wall_time_s": ("chain", np.array([v[1] for v in chains.values()]), {"units": "s", "long_name": "time of the chain's equilibrium (surrogate load included)"}),
+            "pressure_2d_kpa": (("group", "chamber"), p2, {"units": "kPa", "long_name": "pressures applied in 2D"}),
+        },
+        coords={"h_mm": hs, "joint": list(JOINTS), "chain": list(chains), "group": plan["group"].values,
+                "chamber": plan["chamber"].values},
+    )
+    ds.attrs.update({"exercise": exercise, "patient": patient_name})
+    write_dataset(ds, out, rule=rule, config_slice=config_slice,
+                  title=f"FEA check of {exercise} by element size, patient {patient_name}")
+    return ds
+
+
+# --------------------------------------------------------------------------
+# Everything on one table
+# --------------------------------------------------------------------------
+def _surrogate_rows(responses: Mapping[str, str], fem: xr.Dataset, surrogates_cfg: Mapping, cv: xr.Dataset):
+    """Every regressor of each sweep, fitted on all its samples, at the unit study points."""
+    from workflow.surrogates import fit_surrogate
+
+    rows = []
+    for fea, path in responses.items():
+        resp = xr.load_dataset(path)
+        sweep_time = float(resp["wall_time_s"].sum())
+        ref = fem.where(fem["model"] == fea, drop=True)
+        for reg in [str(r) for r in cv["regressor"].values]:
+            t0 = time.perf_counter()
+            s = fit_surrogate(resp, reg, fea=fea, k=int(surrogates_cfg["k"]), random_state=int(surrogates_cfg["random_state"]))
+            fit_t = time.perf_counter() - t0
+            p = np.array(P_STUDY)
+            t1 = time.perf_counter()
+            a, m = s.angle_deg(p, 0.0 * p), s.moment_nm(p, 0.0 * p)
+            q_t = time.perf_counter() - t1
+            rows.append((f"surrogate_{fea}_{reg}", f"surrogate_{fea}", FD.unit_quantities(a, m, p), q_t,
+                         sweep_time + fit_t, ref, s))
+    return rows
+
+
+def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_nc: str, responses: Mapping[str, str],
+                         cv_nc: str, msk_nc: str | None, check_nc: str | None, plan_inputs: Mapping | None,
+                         surrogates_cfg: Mapping, config_slice: Any, rule: str = "speed_accuracy") -> xr.Dataset:
+    """Rule ``speed_accuracy``: every fidelity on one (method, quantity) table, Pareto fronts, chart.
+
+    Quantities and references (see :mod:`workflow.fidelity`): the unit's six
+    (reference: the finest converged FE case with contact of the same model;
+    surrogates are compared with it too, so their error includes the mesh
+    error of the sweep they learnt from); ``cv_angle`` / ``cv_moment``
+    (surrogates: mean CV RMSE / std on held-out FE samples, since the unit
+    points lie on a sweep ray, where interpolators are exact); ``plan_TGEn``
+    (RMS over the eight pressures, kPa, against the plan made with the
+    regressor of the best CV score); ``check_{exercise}`` of the check study
+    (deg, largest over the joints, against the finest converged mesh); the
+    joint moments (relative, against direct
+    OpenSim sampling, over the test patients inside the design region).
+    """
+    fem = xr.load_dataset(fem_nc)
+    cv = xr.load_dataset(cv_nc)
+    methods, family, wall, setup = [], [], [], []
+    quantities: list[str] = list(FD.UNIT_QUANTITIES)
+    units = {q: "1" for q in quantities}
+    refs = {q: "" for q in quantities}
+    cells: dict[tuple[str, str], tuple[float, float]] = {}  # (method, quantity) -> (value, error)
+
+    for i, case in enumerate(fem["case"].values):
+        m = str(case)
+        methods.append(m)
+        family.append(f"fem_{fem['model'].values[i]}")
+        wall.append(float(fem["wall_time_s"].values[i]))
+        setup.append(0.0)
+        for j, q in enumerate(FD.UNIT_QUANTITIES):
+            cells[m, q] = (float(fem["value"].values[i, j]), float(fem["error"].values[i, j]))
+    for q in FD.UNIT_QUANTITIES:
+        r = {str(x) for x in fem["reference_case"].sel(quantity=q).values if str(x)}
+        refs[q] = ", ".join(sorted(r))
+
+    rows = _surrogate_rows(responses, fem, surrogates_cfg, cv)
+    # held-out accuracy: the study points lie on a sweep ray, where interpolators are exact
+    for t in ("angle", "moment"):
+        quantities.append(f"cv_{t}")
+        units[f"cv_{t}"] = "1"
+        refs[f"cv_{t}"] = "the held-out FE samples of the surrogate's own sweep"
+    for name, fam, qv, q_t, s_t, ref, _ in rows:
+        methods.append(name)
+        family.append(fam)
+        wall.append(q_t)
+        setup.append(s_t)
+        for j, q in enumerate(FD.UNIT_QUANTITIES):
+            rv = ref["value"].values[:, j]
+            rc = ref["reference_case"].values[:, j]
+            k = [i for i, n in enumerate(ref["case"].values) if str(n) == str(rc[0])] if rc.size else []
+            e = FD.relative_errors(qv[q], rv[k[0]]) if k else np.nan
+            cells[name, q] = (qv[q], float(e))
+        fea, reg = name.split("_", 2)[1], name.split("_", 2)[2]
+        for t in ("angle", "moment"):
+            c = cv.sel(fea=fea, regressor=reg, target=t)
+            nrmse = float((c["rmse"] / c["target_std"]).mean("fold"))
+            cells[name, f"cv_{t}"] = (float(c["rmse"].mean("fold")), nrmse)
+
+    if plan_inputs:
+        from workflow.cascade import patient_cascade, patient_finger, plan_exercise
+        from workflow.unit_model import UnitModel
+
+        pi = plan_inputs
+        loads = xr.load_dataset(pi["joint_loads"])
+        finger, _ = patient_finger(pi["patient"], loads, xr.load_dataset(pi["moments"]), xr.load_dataset(pi["ccd"]),
+                                   cascade_cfg=pi["cascade"], anthropometry=pi["anthropometry"])
+        c = pi["cascade"]
+        limits = np.abs(loads["active_limit_nm"].values)
+        targets = {str(e): loads["target_angle_deg"].sel(exercise=e).values for e in loads["exercise"].values}
+        plan_fea = c.get("surrogate", "3d")
+        cand = [r for r in rows if r[1] == f"surrogate_{plan_fea}"]
+        # reference plan: the regressor with the best held-out (CV) score
+        best = min(cand, key=lambda r: cells[r[0], "cv_angle"][1] + cells[r[0], "cv_moment"][1])
+        plans = {}
+        for name, _, _, _, s_t, _, s in cand:
+            unit = UnitModel.from_surrogate(s, **pi["unit_model"])
+            ro = patient_cascade(finger, unit, c)
+            t0 = time.perf_counter()
+            plans[name] = {e: plan_exercise(ro, t, exercise=e, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
+                                            p_max_kpa=c["p_max_kpa"], tie_cmc_mcp=c["tie_cmc_mcp"],
+                                            margin_deg=c["margin_deg"]).pressures_kpa for e, t in targets.items()}
+            t_plan = time.perf_counter() - t0
+            pm = name.replace("surrogate_", "plan_")
+            methods.append(pm)
+            family.append("plan")
+            wall.append(t_plan)
+            setup.append(s_t)
+        for e in targets:
+            q = f"plan_{e}"
+            quantities.append(q)
+            units[q] = "kPa"
+            refs[q] = best[0].replace("surrogate_", "plan_")
+            for name in plans:
+                d = plans[name][e] - plans[best[0]][e]
+                cells[name.replace("surrogate_", "plan_"), q] = (float(np.sqrt(np.mean(plans[name][e] ** 2))),
+                                                                 float(np.sqrt(np.mean(d**2))))
+
+    if check_nc:
+        chk = xr.load_dataset(check_nc)
+        ok = chk["status"].values == 0
+        hs = chk["h_mm"].values
+        r = int(np.flatnonzero(ok)[np.argmin(hs[ok])]) if ok.any() else None
+        ex = str(chk.attrs["exercise"])
+        qs = [f"check_{ex}"]
+        quantities += qs
+        units[qs[0]] = "degree"
+        refs[qs[0]] = f"check_h{hs[r]:g}" if r is not None else ""
+        ref_ang = chk["angle_deg"].values[r] if r is not None else np.full(3, np.nan)
+        for i, h in enumerate(hs):
+            m = f"check_h{h:g}"
+            methods.append(m)
+            family.append("check")
+            wall.append(float(chk["wall_time_s"].values[i]))
+            setup.append(0.0)
+            e = float(np.max(np.abs(chk["angle_deg"].values[i] - ref_ang))) if ok[i] else np.nan
+            cells[m, qs[0]] = (float(chk["angle_deg"].values[i, 0]), e)
+        for k, ch in enumerate(chk["chain"].values):
+            m = str(ch)
+            methods.append(m)
+            family.append("check")
+            wall.append(float(chk["chain_wall_time_s"].values[k]))
+            setup.append(0.0)
+            cells[m, qs[0]] = (float(chk["chain_angle_deg"].values[k, 0]),
+                               float(np.max(np.abs(chk["chain_angle_deg"].values[k] - ref_ang))))
+
+    if msk_nc:
+        msk = xr.load_dataset(msk_nc)
+        inside = msk["inside_design"].values.astype(bool)
+        for q in msk["quantity"].values:
+            quantities.append(f"msk_{q}")
+            units[f"msk_{q}"] = "1"
+            refs[f"msk_{q}"] = "msk_opensim"
+        for m in msk["method"].values:
+            methods.append(str(m))
+            family.append("musculoskeletal")
+            # the median over the test patients: the first direct sample also loads the model
+            wall.append(float(msk["wall_time_s"].sel({"method": m}).median()))
+            setup.append(float(msk["setup_time_s"].sel({"method": m})) if "setup_time_s" in msk else 0.0)
+            for q in msk["quantity"].values:
+                e = msk["rel_error"].sel({"method": m, "quantity": q}).values[inside]
+                v = msk["moment_nm"].sel({"method": m, "quantity": q}).values[inside]
+                cells[str(m), f"msk_{q}"] = (float(np.mean(v)) if v.size else np.nan,
+                                             float(np.nanmax(e)) if e.size and np.isfinite(e).any() else np.nan)
+
+    err = np.full((len(methods), len(quantities)), np.nan)
+    val = np.full_like(err, np.nan)
+    for i, m in enumerate(methods):
+        for j, q in enumerate(quantities):
+            if (m, q) in cells:
+                val[i, j], err[i, j] = cells[m, q]
+    ds = FD.speed_accuracy_dataset(methods, quantities, wall, err, family=family, error_units=units, reference=refs,
+                                   value=val, setup_time_s=setup)
+    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
+                  title="Speed against accuracy of every fidelity the workflow offers")
+    if out_png:
+        from workflow.plots_fidelity import plot_speed_accuracy
+
+        plot_speed_accuracy(ds, out_png)
+    return ds
