@@ -2,7 +2,8 @@
 
 The mean finger with the test springs of tests/test_cascade.py and a plan made
 with the analytic unit of tests/test_cascade.py (LinearUnit), or a given
-``cascade_plan.nc``; per mesh size (actuator h = finger h) and exercise: DOFs,
+``cascade_plan.nc`` (with the patient's own finger and springs when its
+``joint_loads.nc`` and the run's moments lie beside it, as in ``results/``); per mesh size (actuator h = finger h) and exercise: DOFs,
 wall time and Newton iterations of the gravity phase (shared) and of the
 pressure phase, load steps, peak memory (ru_maxrss of the case's own process,
 and tracemalloc's Python heap), the angles reached and the status.  Each mesh
@@ -48,6 +49,14 @@ def _case(h: float, exercises: list[str], plan_path: str | None, surrogates, q):
     finger = mean_finger(springs=springs(), densities=DENSITIES)
     if plan_path:
         plan = xr.load_dataset(plan_path)
+        res = Path(plan_path).resolve().parents[2]  # results/patients/{patient}/cascade_plan.nc
+        pdir = Path(plan_path).resolve().parent
+        if (pdir / "joint_loads.nc").is_file():  # the patient's own finger and springs, as the workflow builds them
+            finger, _ = C.patient_finger(cfg["patients"].get(pdir.name, {"finger": "F3"}), xr.load_dataset(pdir / "joint_loads.nc"),
+                                         xr.load_dataset(res / "musculoskeletal" / "moments.nc"),
+                                         xr.load_dataset(res / "doe" / "ccd.nc"),
+                                         cascade_cfg=dict(cfg["cascade"], section_points=str(SECTION)),
+                                         anthropometry=cfg["anthropometry"])
     else:
         model = C.build_cascade(finger, LinearUnit(), actuator_dims_mm=ACTUATOR)
         tg = {e: [v["mcp"], v["pip"], v["dip"]] for e, v in cfg["exercises"].items()}

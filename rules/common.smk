@@ -72,7 +72,8 @@ def get_final_output():
                        "not found (set cascade.section_points)")
     # Stability maps, speed against accuracy and the report's plots and tables (issue 7).
     out += ["results/stability/stability.nc", "results/musculoskeletal/moment_angle.png"]
-    out += ["results/benchmarks/speed_accuracy.nc", "results/report/speed_accuracy.html"]
+    out += ["results/benchmarks/speed_accuracy.nc", "results/report/speed_accuracy.html",
+            "results/report/fidelity_choices.html"]
     out += expand("results/report/{table}.html", table=["scaling", "musculoskeletal", "unit_check", "surrogate_cv",
                                                        "mapping", "cascade_validation"])
     out += expand("results/patients/{patient}/{table}.html", patient=PATIENTS, table=["joint_loads", "cascade_plan"])
@@ -82,13 +83,20 @@ def get_final_output():
 def get_tracking_inputs(wildcards):
     """Input function: what one patient's ledger row reports (the datasets and plots)."""
     p = wildcards.patient
-    return {
+    out = {
         "scaling": "results/validation/scaling.nc",
         "rsm": "results/musculoskeletal/rsm.nc",
         "rsm_plot": "results/musculoskeletal/rsm_r2.png",
         "loads": f"results/patients/{p}/joint_loads.nc",
         "loads_plot": f"results/patients/{p}/joint_loads.png",
+        "plan": f"results/patients/{p}/cascade_plan.nc",
     }
+    # the validation patient's row also carries its FEA check and the fidelity choice
+    if p == config["cascade"]["validation_patient"] and Path(config["cascade"]["section_points"]).is_file():
+        out["fea_check"] = f"results/patients/{p}/fea_check.nc"
+    if fidelity_auto():
+        out["fidelity"] = "results/fidelity/fem.nc"
+    return out
 
 
 def moments_source():
@@ -201,4 +209,15 @@ def get_speed_accuracy_inputs(wildcards):
            "ccd": "results/doe/ccd.nc"}
     if Path(config["cascade"]["section_points"]).is_file():
         out["check"] = f"results/patients/{vp}/fidelity_check.nc"
+    return out
+
+
+def get_fidelity_choice_inputs(wildcards):
+    """Input function: the outputs whose attrs say which fidelity they used (unit check, responses,
+    surrogate CV, every patient's loads, the validation patient's FEA check)."""
+    out = {"unit_check": "results/actuator/unit_check.nc", "cv": "results/actuator/surrogate_cv.nc",
+           "responses": expand("results/actuator/response_{fea}.nc", fea=["2d", "3d"]),
+           "loads": expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS)}
+    if Path(config["cascade"]["section_points"]).is_file():
+        out["fea_check"] = f"results/patients/{config['cascade']['validation_patient']}/fea_check.nc"
     return out

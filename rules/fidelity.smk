@@ -38,7 +38,7 @@ rule fidelity_fem_choice:
     output:
         "results/fidelity/fem.nc",
     params:
-        tolerance=config["fidelity"]["tolerance"]["fem_rel"],
+        tolerance={q: config["fidelity"]["tolerance"][f"fem_{q}_rel"] for q in ("angle", "moment")},
         config_slice={"fidelity": {k: config["fidelity"][k] for k in ("fem_cases", "p_top_kpa", "tolerance")}},
     log:
         "logs/fidelity/fidelity_fem_choice.log",
@@ -132,7 +132,8 @@ rule speed_accuracy_table:
         dataset="results/benchmarks/speed_accuracy.nc",
         code=code_files("report_tables"),
     output:
-        report("results/report/speed_accuracy.html", caption="../report/tables.rst", category="Speed and accuracy"),
+        report("results/report/speed_accuracy.html", caption="../report/speed_accuracy_table.rst",
+               category="Speed and accuracy"),
     params:
         table="speed_accuracy",
     log:
@@ -141,3 +142,18 @@ rule speed_accuracy_table:
         "results/benchmarks/rules/speed_accuracy_table.tsv"
     script:
         "../workflow/scripts/report_table.py"
+
+
+rule fidelity_choices:
+    input:
+        unpack(get_fidelity_choice_inputs),
+        code=code_files("report_tables"),
+    output:
+        report("results/report/fidelity_choices.html", caption="../report/fidelity_choices.rst",
+               category="Speed and accuracy"),
+    log:
+        "logs/report/fidelity_choices.log",
+    benchmark:
+        "results/benchmarks/rules/fidelity_choices.tsv"
+    script:
+        "../workflow/scripts/fidelity_choices.py"

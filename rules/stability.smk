@@ -52,7 +52,8 @@ rule stability_maps:
         ccd="results/doe/ccd.nc",
         loads=expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS),
         plans=expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS),
-        code=code_files("stability", "stability_run", "plots_stability", "sweep"),
+        fem_cases=expand("results/fidelity/fem/{case}.nc", case=FEM_CASES),
+        code=code_files("stability", "stability_run", "plots_stability", "sweep", "fidelity"),
     output:
         nc="results/stability/stability.nc",
         failures=report("results/stability/newton_failures.png", caption="../report/stability_failures.rst",

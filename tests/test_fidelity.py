@@ -86,6 +86,10 @@ def test_fem_choice_picks_the_cheapest_case_within_tolerance(tmp_path):
     act, attrs = FD.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}, "contact": {"enabled": False}}, ds, "2d")
     assert act["mesh"]["h_2d_mm"] == 1.0 and act["contact"]["enabled"] is True
     assert attrs["fidelity"] == "fem_2d_h1_contact" and "within" in attrs["fidelity_reason"]
+    # separate bounds: a tight one on the moment (1 mm is 2 % off at 60 kPa) moves the choice to the finest
+    strict = write_fem_choice(files, tmp_path / "fem_strict.nc", tolerance={"angle": 0.03, "moment": 0.01}, config_slice={})
+    assert str(strict["chosen_case"].sel(model_choice="2d").values) == "fem_2d_h0.5_contact"
+    assert "blocked moment" in str(strict["choice_reason"].sel(model_choice="2d").values)
     act, attrs = FD.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}}, None, "2d")
     assert act["mesh"]["h_2d_mm"] == 2.0 and attrs["fidelity"] == "config"
 

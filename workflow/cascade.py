@@ -757,6 +757,7 @@ def write_cascade_plan(
     config_slice: Any,
     rule: str = "cascade_plan",
     sampled_region: Any = None,
+    notes: Mapping[str, str] | None = None,
 ):
     """Build the patient's finger and actuator, plan every exercise, write the plan (and poses plot).
 
@@ -765,6 +766,7 @@ def write_cascade_plan(
     `workflow.stability.SampledRegion` of the surrogate's sweep), if given,
     flags planned (P_T, P_B) pairs outside the converged FE samples or nearest
     a failed one: ``pressure_in_sampled_region`` and a warning in the log.
+    ``notes`` go into the attrs (e.g. the surrogate's fidelity and why).
     """
     import logging
     import time
@@ -796,7 +798,7 @@ def write_cascade_plan(
         plans.append(p)
     ds = plans_dataset(model, plans, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
                        notes={"patient": patient_name, "finger": finger_name, "springs": spring_note,
-                              "planning_wall_time_s": round(time.perf_counter() - t0, 3)})
+                              "planning_wall_time_s": round(time.perf_counter() - t0, 3), **dict(notes or {})})
     if sampled_region is not None:
         # the surrogate is an extrapolation outside its samples (issue 7 item 2): flag, do not stop
         from workflow.stability import flag_pressure_table

@@ -215,6 +215,8 @@ def fe_samples(sources: Sequence[tuple[str, xr.Dataset]]) -> xr.Dataset:
     (`rays_dataset`) or ``unit_check`` (``unit_check.nc``, attrs ``h_2d_mm``,
     ``h_3d_mm``, ``contact``).  Variables: ``method``, ``case`` (``free``,
     ``blocked`` or ``free+blocked``), ``p_top_kpa``, ``p_bottom_kpa``,
+    (kind ``fem_case``: one case file of the fidelity study, attrs ``model``,
+    ``h_mm``, ``contact``),
     ``status``, ``mirrored``, ``max_penetration_mm`` (NaN where the source
     does not record it), ``ray_last_converged_kpa``.
     """
@@ -259,6 +261,15 @@ def fe_samples(sources: Sequence[tuple[str, xr.Dataset]]) -> xr.Dataset:
                     n = d.sizes["p_top_kpa"]
                     add(name, str(case), d["p_top_kpa"].values, np.full(n, float(d["p_bottom_kpa"])), st,
                         np.zeros(n, bool), d["max_penetration_mm"].values, np.zeros(n, int))
+        elif kind == "fem_case":  # one fidelity-study case (workflow.fidelity_run.write_fem_case)
+            name = method_name("fidelity study", str(ds.attrs["model"]), float(ds.attrs["h_mm"]),
+                               bool(int(ds.attrs["contact"])))
+            for case in ds["case"].values:
+                d = ds.sel(case=case)
+                st = np.where(d["status"].values == 0, 0, np.where(d["status"].values == 3, 3, 1))
+                n = d.sizes["p_top_kpa"]
+                add(name, str(case), d["p_top_kpa"].values, np.full(n, float(d["p_bottom_kpa"])), st,
+                    np.zeros(n, bool), d["max_penetration_mm"].values, np.zeros(n, int))
         else:
             raise ValueError(f"unknown source kind {kind!r}")
     n = len(cols["method"])

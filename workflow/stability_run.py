@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -105,11 +105,30 @@ def write_locking(out: str | Path, *, locking_cfg: Mapping[str, Any], actuator: 
 
 
 def _sweep_with_mesh(path: str | Path, fea: str, actuator: Mapping[str, Any]) -> xr.Dataset:
+    """The sweep with its mesh and contact: its own attrs (the fidelity it was solved with), else the config's."""
     ds = xr.load_dataset(path)
     mesh = dict(actuator.get("mesh", {}))
-    ds.attrs.update({"fea": fea, "h_mm": float(mesh.get(f"h_{fea}_mm", 1.0 if fea == "2d" else 2.0)),
-                     "contact": bool(dict(actuator.get("contact", {})).get("enabled", True))})
+    ds.attrs["fea"] = fea
+    ds.attrs.setdefault("h_mm", float(mesh.get(f"h_{fea}_mm", 1.0 if fea == "2d" else 2.0)))
+    ds.attrs["contact"] = bool(int(ds.attrs.get("contact", dict(actuator.get("contact", {})).get("enabled", True))))
     return ds
+
+
+def _unit_check_mesh(uc: xr.Dataset, actuator: Mapping[str, Any]) -> xr.Dataset:
+    """The unit check with its meshes: from its fidelity attrs (``fidelity_2d`` = a case name), else the config's."""
+    from workflow.fidelity import FemCase
+
+    mesh = dict(actuator.get("mesh", {}))
+    contact = bool(dict(actuator.get("contact", {})).get("enabled", True))
+    for m, default in (("2d", 1.0), ("3d", 2.0)):
+        h = float(mesh.get(f"h_{m}_mm", default))
+        name = str(uc.attrs.get(f"fidelity_{m}", ""))
+        if name.startswith("fem_"):
+            case = FemCase.parse(name)
+            h, contact = case.h_mm, case.contact
+        uc.attrs[f"h_{m}_mm"] = h
+    uc.attrs["contact"] = contact
+    return uc
 
 
 def summary_table(ds: xr.Dataset) -> pd.DataFrame:
@@ -148,17 +167,17 @@ def write_stability(out: str | Path, *, responses: Mapping[str, str | Path], uni
                     rays: str | Path, locking: str | Path, ccd: str | Path, loads: Mapping[str, str | Path],
                     plans: Mapping[str, str | Path], actuator: Mapping[str, Any], stab_cfg: Mapping[str, Any],
                     cascade_surrogate: str, config_slice: Any, plots: Mapping[str, str | Path] | None = None,
-                    table_html: str | Path | None = None, rule: str = "stability_maps") -> xr.Dataset:
+                    table_html: str | Path | None = None, rule: str = "stability_maps",
+                    fem_cases: Sequence[str | Path] | None = None) -> xr.Dataset:
     """Gather the five maps into ``stability.nc`` (and the plots and the summary table)."""
     sweeps = {fea: _sweep_with_mesh(p, fea, actuator) for fea, p in responses.items()}
     sources: list[tuple[str, xr.Dataset]] = [("sweep", sweeps[f]) for f in sweeps]
     uc = None
     if unit_check is not None:
-        uc = xr.load_dataset(unit_check)
-        mesh = dict(actuator.get("mesh", {}))
-        uc.attrs.update({"h_2d_mm": float(mesh.get("h_2d_mm", 1.0)), "h_3d_mm": float(mesh.get("h_3d_mm", 2.0)),
-                         "contact": bool(dict(actuator.get("contact", {})).get("enabled", True))})
+        uc = _unit_check_mesh(xr.load_dataset(unit_check), actuator)
         sources.append(("unit_check", uc))
+    # the fidelity study's FE cases: every mesh and contact switch to 300 kPa, free and blocked
+    sources += [("fem_case", xr.load_dataset(f)) for f in (fem_cases or ())]
     rays_ds = xr.load_dataset(rays)
     sources.append(("rays", rays_ds))
     samples = S.fe_samples(sources)

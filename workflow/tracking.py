@@ -89,6 +89,30 @@ def _surrogate_metrics(results: Path, patient: str) -> dict[str, float]:
     return out
 
 
+def _fea_check_metrics(results: Path, patient: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    with xr.open_dataset(results / "patients" / patient / "fea_check.nc") as ds:
+        out["fea_check_reached"] = float(np.asarray(ds["achieved"].values, bool).sum())
+        if "achieved_corrected" in ds:
+            out["fea_check_reached_corrected"] = float(np.asarray(ds["achieved_corrected"].values, bool).sum())
+        for e in ds["exercise"].values:
+            out[f"fea_check_{e}_max_abs_error_deg"] = float(np.abs(ds["angle_error_deg"].sel(exercise=e)).max())
+            out[f"fea_check_{e}_wall_s"] = float(ds["wall_time_s"].sel(exercise=e))
+        out["fea_check_ndofs"] = float(ds["ndofs"])
+    return out
+
+
+def _fidelity_metrics(results: Path, patient: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    with xr.open_dataset(results / "fidelity" / "fem.nc") as ds:
+        for m in ds["model_choice"].values:
+            out[f"fidelity_fem_{m}_h_mm"] = float(ds["chosen_h_mm"].sel(model_choice=m))
+            case = str(ds["chosen_case"].sel(model_choice=m).values)
+            out[f"fidelity_fem_{m}_max_rel_error"] = float(ds["error"].sel(case=case).max())
+            out[f"fidelity_fem_{m}_wall_s"] = float(ds["wall_time_s"].sel(case=case))
+    return out
+
+
 #: headline metrics per result file; a file that is absent contributes nothing.
 COLLECTORS: tuple[tuple[str, Callable[[Path, str], dict[str, float]]], ...] = (
     ("validation/scaling.nc", _scaling_metrics),
@@ -96,6 +120,8 @@ COLLECTORS: tuple[tuple[str, Callable[[Path, str], dict[str, float]]], ...] = (
     ("patients/{patient}/joint_loads.nc", _joint_load_metrics),
     ("patients/{patient}/cascade_plan.nc", _cascade_metrics),
     ("actuator/surrogate_cv.nc", _surrogate_metrics),
+    ("patients/{patient}/fea_check.nc", _fea_check_metrics),
+    ("fidelity/fem.nc", _fidelity_metrics),
 )
 
 

@@ -3,16 +3,20 @@ import xarray as xr
 from workflow.cascade import write_cascade_plan
 from workflow.scripts._common import setup_logging
 from workflow.stability import SampledRegion
-from workflow.unit_model import load_unit_model
+from workflow.surrogates import load_surrogate
+from workflow.unit_model import UnitModel
 
 setup_logging(snakemake)  # noqa: F821
 p = snakemake.params  # noqa: F821
 i = snakemake.input  # noqa: F821
-unit = load_unit_model(i.unit_response, **p.unit_model)
+surrogate = load_surrogate(i.unit_response)
+unit = UnitModel.from_surrogate(surrogate, **p.unit_model)
+# which surrogate the plan stands on, and why (fidelity.auto or the CV rule)
+notes = {"fidelity": f"{surrogate.fea} {surrogate.regressor}", "fidelity_reason": surrogate.meta.get("fidelity_reason", "")}
 # the sweep the surrogate was fitted on: planned pressures outside its converged samples are flagged
 region = SampledRegion.from_response(xr.load_dataset(i.response)) if "response" in i.keys() else None
 write_cascade_plan(snakemake.wildcards.patient, p.patient, unit, ccd_nc=i.ccd, moments_nc=i.moments,  # noqa: F821
                    joint_loads_nc=i.joint_loads, out_nc=snakemake.output.plan,  # noqa: F821
                    out_png=snakemake.output.plot, cascade_cfg=p.cascade,  # noqa: F821
                    anthropometry=p.anthropometry, config_slice=p.config_slice, rule=snakemake.rule,  # noqa: F821
-                   sampled_region=region)
+                   sampled_region=region, notes=notes)

@@ -9,5 +9,5 @@ write_stability(
     actuator=p.actuator, stab_cfg=p.stability, cascade_surrogate=p.cascade_surrogate, config_slice=p.config_slice,
     plots={"failures": o.failures, "locking": o.locking, "penetration": o.penetration, "coverage": o.coverage,
            "design": o.design},
-    table_html=o.table, rule=snakemake.rule,  # noqa: F821
+    table_html=o.table, rule=snakemake.rule, fem_cases=list(i.fem_cases),  # noqa: F821
 )
