@@ -13,7 +13,7 @@
 
 rule fidelity_fem:
     input:
-        code=code_files("fidelity_run", "fem"),
+        code=code_files("fem_study"),
     output:
         "results/fidelity/fem/{case}.nc",
     wildcard_constraints:

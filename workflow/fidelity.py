@@ -29,12 +29,13 @@ Units: wall time s, pressures kPa, angles deg, moments N m.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
+
+from workflow.fem_study import FemCase, case_actuator, fem_cases  # noqa: F401 - part of this module's API
 
 __all__ = [
     "UNIT_QUANTITIES",
@@ -53,37 +54,6 @@ __all__ = [
 
 #: The unit quantities of the FE and surrogate methods (P_B = 0).
 UNIT_QUANTITIES = tuple(f"{q}_{p}" for q in ("angle", "moment") for p in (60, 180, 300))
-
-
-@dataclass(frozen=True)
-class FemCase:
-    """One FE unit fidelity: model (``2d``/``3d``), element size (mm), self-contact."""
-
-    model: str
-    h_mm: float
-    contact: bool
-
-    @property
-    def name(self) -> str:
-        return f"fem_{self.model}_h{self.h_mm:g}_{'contact' if self.contact else 'nocontact'}"
-
-    @classmethod
-    def parse(cls, name: str) -> "FemCase":
-        m = re.fullmatch(r"fem_(2d|3d)_h([0-9.]+)_(contact|nocontact)", name)
-        if m is None:
-            raise ValueError(f"not an FE case name: {name!r} (expected e.g. fem_2d_h1_contact)")
-        return cls(m.group(1), float(m.group(2)), m.group(3) == "contact")
-
-
-def fem_cases(spec: Sequence[Mapping]) -> list[FemCase]:
-    """Cases of the config list ``[{model, h_mm: [...], contact}, ...]``, each once, in order."""
-    out: list[FemCase] = []
-    for s in spec:
-        for h in s["h_mm"]:
-            c = FemCase(str(s["model"]), float(h), bool(s["contact"]))
-            if c not in out:
-                out.append(c)
-    return out
 
 
 def unit_quantities(angle_deg: Sequence[float], moment_nm: Sequence[float], p_top_kpa: Sequence[float]) -> dict[str, float]:
@@ -190,13 +160,6 @@ def cheapest_within(stage: str, methods: Sequence[str], wall_time_s: Sequence[fl
     i = int(np.flatnonzero(cand)[np.argmin(e[cand])])
     return Choice(stage, methods[i], f"{methods[i]}: no method within {fmt(tolerance)}; the most accurate "
                   f"converged one taken (error {fmt(e[i])}, {t[i]:.1f} s)", float(e[i]), float(t[i]), False)
-
-
-def case_actuator(actuator: Mapping, case: FemCase) -> dict:
-    """The ``actuator`` config with the case's element size and contact switch."""
-    mesh = dict(actuator.get("mesh", {}), **{f"h_{case.model}_mm": float(case.h_mm)})
-    contact = dict(actuator.get("contact", {}), enabled=bool(case.contact))
-    return dict(actuator, mesh=mesh, contact=contact)
 
 
 def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -> tuple[dict, dict]:

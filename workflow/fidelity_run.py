@@ -1,9 +1,6 @@
 """File-level entry points of the fidelity stage (issue 7 items 1 and 3).
 
-* :func:`write_fem_case` -- one FE unit fidelity (model, element size,
-  contact): free angle and blocked moment at P_T = 60/180/300 kPa, with its
-  wall time (the unit check's rays, :func:`workflow.fem.unit_check`);
-* :func:`write_fem_choice` -- all cases against the finest converged one of
+* :func:`write_fem_choice` -- the FE unit cases (:mod:`workflow.fem_study`) against the finest converged one of
   their model, and the cheapest case per model within the tolerance (what the
   sweeps and the unit check then use when ``fidelity.auto`` is on);
 * :func:`write_msk_study` -- response surfaces against direct OpenSim
@@ -29,37 +26,17 @@ import xarray as xr
 from workflow import fidelity as FD
 from workflow.provenance import write_dataset
 
-__all__ = ["write_fem_case", "fem_table", "write_fem_choice", "write_msk_study",
+__all__ = ["fem_table", "write_fem_choice", "write_msk_study",
            "write_check_study", "write_speed_accuracy"]
 
 log = logging.getLogger(__name__)
 
-P_STUDY = (60.0, 180.0, 300.0)
+P_STUDY = (60.0, 180.0, 300.0)  # as workflow.fem_study
 
 
 # --------------------------------------------------------------------------
 # FE unit: one case, the table, the choice
 # --------------------------------------------------------------------------
-def write_fem_case(case_name: str, out: str | Path, *, actuator: Mapping[str, Any], config_slice: Any,
-                   p_top_kpa: Sequence[float] = P_STUDY, rule: str = "fidelity_fem") -> xr.Dataset:
-    """Rule ``fidelity_fem``: the unit check of one case -> ``results/fidelity/fem/{case}.nc``."""
-    from workflow import fem
-
-    case = FD.FemCase.parse(case_name)
-    t0 = time.perf_counter()
-    ds, _ = fem.unit_check(FD.case_actuator(actuator, case), (case.model,), p_top_kpa)
-    wall = time.perf_counter() - t0
-    ds = ds.squeeze("model", drop=True)
-    ds["case_wall_time_s"] = ((), wall, {"units": "s", "long_name": "wall time of both rays (free, blocked), retries included"})
-    ds.attrs.update({"case": case.name, "model": case.model, "h_mm": case.h_mm, "contact": int(case.contact)})
-    log.info("%s: free %s deg, blocked %s N m, status %s, %.1f s", case.name,
-             np.round(ds["bending_angle_deg"].values, 3), np.round(ds["bending_moment_nm"].values, 4),
-             ds["status"].values.ravel().tolist(), wall)
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title=f"FE unit fidelity {case.name}: free angle and blocked moment at P_T = 60/180/300 kPa")
-    return ds
-
-
 def fem_table(cases: Sequence[xr.Dataset]) -> xr.Dataset:
     """The cases on one table (case, quantity) with errors against each model's finest converged case.
 

@@ -1,4 +1,4 @@
-from workflow.fidelity_run import write_fem_case
+from workflow.fem_study import write_fem_case
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821
