@@ -100,6 +100,10 @@ def test_check_choice_takes_the_coarsest_mesh_whose_angles_stay_close():
                        coords={"h_mm": [3.0, 2.5, 2.0, 1.5]}, attrs={"exercise": "TGE2"})
     h, why = FD.check_choice(study, 2.0, 2.0)
     assert h == 2.5 and "TGE2" in why
+    # a mesh whose contact penetrates beyond the bound is no valid check, however close its angles
+    study["max_penetration_mm"] = ("h_mm", [0.05, 0.2, 0.04, 0.03])
+    h, why = FD.check_choice(study, 2.0, 2.0, penetration_bound_mm=0.1)
+    assert h == 2.0 and "penetration <= 0.1 mm" in why
     h, _ = FD.check_choice(None, 2.0, 1.75)
     assert h == 1.75
 
@@ -141,3 +145,9 @@ def test_speed_accuracy_dataset_marks_the_front_per_quantity():
     np.testing.assert_array_equal(ds["pareto"].sel(quantity="q1").values, [True, True, True])
     np.testing.assert_array_equal(ds["pareto"].sel(quantity="q2").values, [True, False, False])
     assert str(ds["error_units"].sel(quantity="q2").values) == "kPa"
+    # a method of another front group (another model's reference) never dominates
+    ds = FD.speed_accuracy_dataset(["2d_fast", "3d_slow", "3d_slower"], ["q"], [1.0, 5.0, 9.0],
+                                   np.array([[0.01], [0.05], [0.02]]), family=["x"] * 3, error_units={"q": "1"},
+                                   reference={"q": ""}, front_group=["2d", "3d", "3d"])
+    np.testing.assert_array_equal(ds["pareto"].sel(quantity="q").values, [True, True, True])
+

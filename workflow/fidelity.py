@@ -90,24 +90,32 @@ def pareto_front(wall_time_s: np.ndarray, error: np.ndarray) -> np.ndarray:
 def speed_accuracy_dataset(methods: Sequence[str], quantities: Sequence[str], wall_time_s: Sequence[float],
                            error: np.ndarray, *, family: Sequence[str], error_units: Mapping[str, str],
                            reference: Mapping[str, str], value: np.ndarray | None = None,
-                           setup_time_s: Sequence[float] | None = None, notes: Mapping[str, str] | None = None
-                           ) -> xr.Dataset:
+                           setup_time_s: Sequence[float] | None = None, front_group: Sequence[str] | None = None,
+                           notes: Mapping[str, str] | None = None) -> xr.Dataset:
     """The contract's ``speed_accuracy.nc``: ``wall_time_s`` (method), ``error`` and ``pareto`` (method, quantity).
 
     ``error_units`` / ``reference``: per quantity, the error's unit and the
     reference method's name; ``value`` (method, quantity) the compared values;
     ``setup_time_s`` (method) a one-off cost behind a method's query time (a
-    surrogate's sweep and fit).
+    surrogate's sweep and fit); ``front_group`` (method): methods compete for
+    a Pareto front only within their group (2D and 3D models answer the same
+    quantity against different references, so each has its own front).
     """
     err = np.asarray(error, float)
     t = np.asarray(wall_time_s, float)
-    par = np.stack([pareto_front(t, err[:, j]) for j in range(err.shape[1])], axis=1) if err.size else err.astype(bool)
+    grp = np.asarray(list(front_group) if front_group is not None else [""] * t.size, dtype=object)
+    par = np.zeros(err.shape, bool)
+    for g in dict.fromkeys(grp.tolist()):
+        rows = grp == g
+        for j in range(err.shape[1]):
+            par[rows, j] = pareto_front(t[rows], err[rows, j])
     ds = xr.Dataset(
         {
             "wall_time_s": ("method", t, {"units": "s", "long_name": "wall time of the method for its quantities"}),
             "error": (("method", "quantity"), err, {"units": "see error_units", "long_name": "error against the quantity's reference"}),
             "pareto": (("method", "quantity"), par, {"units": "1", "long_name": "on the speed-accuracy Pareto front of the quantity"}),
             "family": ("method", np.array(list(family), dtype=object), {"units": "1", "long_name": "stage and kind of the method"}),
+            "front_group": ("method", grp, {"units": "1", "long_name": "methods that share a Pareto front"}),
             "error_units": ("quantity", np.array([error_units[q] for q in quantities], dtype=object), {"units": "1", "long_name": "unit of the error (1 = relative)"}),
             "reference_method": ("quantity", np.array([reference.get(q, "") for q in quantities], dtype=object), {"units": "1", "long_name": "method taken as the reference"}),
         },
@@ -150,7 +158,7 @@ def cheapest_within(stage: str, methods: Sequence[str], wall_time_s: Sequence[fl
     if within.any():
         i = int(np.flatnonzero(within)[np.argmin(t[within])])
         faster = ok & (t < t[i])
-        why = (f"{methods[i]}: the cheapest ({t[i]:.1f} s) within {fmt(tolerance)} (its error {fmt(e[i])})"
+        why = (f"{methods[i]}: the cheapest ({t[i]:.3g} s) within {fmt(tolerance)} (its error {fmt(e[i])})"
                + (f"; faster but outside: {', '.join(f'{methods[k]} {fmt(e[k])}' for k in np.flatnonzero(faster))}"
                   if faster.any() else ""))
         return Choice(stage, methods[i], why, float(e[i]), float(t[i]), True)
@@ -159,7 +167,7 @@ def cheapest_within(stage: str, methods: Sequence[str], wall_time_s: Sequence[fl
         raise ValueError(f"{stage}: no converged method with a known error to choose from")
     i = int(np.flatnonzero(cand)[np.argmin(e[cand])])
     return Choice(stage, methods[i], f"{methods[i]}: no method within {fmt(tolerance)}; the most accurate "
-                  f"converged one taken (error {fmt(e[i])}, {t[i]:.1f} s)", float(e[i]), float(t[i]), False)
+                  f"converged one taken (error {fmt(e[i])}, {t[i]:.3g} s)", float(e[i]), float(t[i]), False)
 
 
 def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -> tuple[dict, dict]:
@@ -177,9 +185,11 @@ def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -
     return case_actuator(act, case), {"fidelity": case.name, "fidelity_reason": str(row["choice_reason"].values)}
 
 
-def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: float) -> tuple[float, str]:
+def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: float,
+                 penetration_bound_mm: float = np.inf) -> tuple[float, str]:
     """(element size, why) for the FEA check: the cheapest mesh whose joint angles are within
-    ``tolerance_deg`` of the finest converged one in the check study (the config's without a study).
+    ``tolerance_deg`` of the finest converged one in the check study (the config's without a study),
+    among the meshes whose contact penetration stays within ``penetration_bound_mm``.
 
     ``study``: the dataset of :func:`workflow.fidelity_run.write_check_study`.
     """
@@ -188,6 +198,8 @@ def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: fl
     c = study
     hs, ang = c["h_mm"].values, c["angle_deg"].values
     ok = c["status"].values == 0
+    if "max_penetration_mm" in c:  # a mesh whose contact penetrates beyond the bound is not a valid check
+        ok &= ~(c["max_penetration_mm"].values > penetration_bound_mm)
     wall = c["wall_time_s"].values
     ex = str(c.attrs.get("exercise", ""))
     if not ok.any():
@@ -196,4 +208,5 @@ def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: fl
     err = np.where(ok, np.max(np.abs(ang - ang[r]), axis=1), np.nan)
     ch = cheapest_within("fea_check", [f"check_h{h:g}" for h in hs], wall, err, tolerance_deg, converged=ok,
                             unit="deg")
-    return float(hs[[f"check_h{h:g}" for h in hs].index(ch.method)]), f"{ch.reason} (study: {ex}, finest h = {hs[r]:g} mm)"
+    pen = "" if not np.isfinite(penetration_bound_mm) else f", penetration <= {penetration_bound_mm:g} mm"
+    return float(hs[[f"check_h{h:g}" for h in hs].index(ch.method)]), f"{ch.reason} (study: {ex}, finest h = {hs[r]:g} mm{pen})"

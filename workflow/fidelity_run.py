@@ -261,6 +261,7 @@ def write_check_study(out: str | Path, *, exercise: str, h_mm: Sequence[float], 
     hs = sorted((float(h) for h in h_mm), reverse=True)
     ang = np.full((len(hs), 3), np.nan)
     wall, ndofs, status = np.full(len(hs), np.nan), np.zeros(len(hs), dtype="i4"), np.zeros(len(hs), dtype="i1")
+    pen = np.full(len(hs), np.nan)
     for i, h in enumerate(hs):
         t0 = time.perf_counter()
         fea = build_patient_fea(finger, upg, actuator_cfg=actuator_cfg, cascade_cfg=cascade_cfg,
@@ -272,6 +273,7 @@ def write_check_study(out: str | Path, *, exercise: str, h_mm: Sequence[float], 
         res = c.result if c is not None else grav
         ang[i] = c.angle_deg if c is not None else grav.joint_angles_deg
         ndofs[i], status[i] = res.ndofs, res.status if c is not None else max(1, grav.status)
+        pen[i] = res.max_penetration_mm
         log.info("check %s at h = %g mm (%d dofs): %s deg, status %d, %.1f s", exercise, h, ndofs[i],
                  np.round(ang[i], 2), status[i], wall[i])
     chains = {}
@@ -286,6 +288,7 @@ def write_check_study(out: str | Path, *, exercise: str, h_mm: Sequence[float], 
             "angle_deg": (("h_mm", "joint"), ang, {"units": "degree", "long_name": "joint angle reached in the FEA check"}),
             "wall_time_s": ("h_mm", wall, {"units": "s", "long_name": "model build, gravity and pressure phases"}),
             "ndofs": ("h_mm", ndofs, {"units": "1", "long_name": "degrees of freedom"}),
+            "max_penetration_mm": ("h_mm", pen, {"units": "mm", "long_name": "largest contact penetration along the load path"}),
             "status": ("h_mm", status, {"units": "1", "long_name": "solver status (0 = converged)"}),
             "chain_angle_deg": (("chain", "joint"), np.array([v[0] for v in chains.values()]), {"units": "degree", "long_name": "reduced-order chain's joint angle"}),
             "chain_wall_time_s": ("chain", np.array([v[1] for v in chains.values()]), {"units": "s", "long_name": "time of the chain's equilibrium (surrogate load included)"}),
@@ -477,8 +480,10 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
         for j, q in enumerate(quantities):
             if (m, q) in cells:
                 val[i, j], err[i, j] = cells[m, q]
+    # 2D and 3D unit models each against their own reference: one front per model, one per other stage
+    group = [f.split("_")[-1] if f.startswith(("fem_", "surrogate_")) else f for f in family]
     ds = FD.speed_accuracy_dataset(methods, quantities, wall, err, family=family, error_units=units, reference=refs,
-                                   value=val, setup_time_s=setup)
+                                   value=val, setup_time_s=setup, front_group=group)
     write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
                   title="Speed against accuracy of every fidelity the workflow offers")
     if out_png:
