@@ -95,13 +95,18 @@ def test_fem_choice_picks_the_cheapest_case_within_tolerance(tmp_path):
 
 
 def test_check_choice_takes_the_coarsest_mesh_whose_angles_stay_close():
-    study = xr.Dataset({"angle_deg": (("h_mm", "joint"), [[30.0, 10, 0], [37.0, 12, 0], [38.0, 12.5, 0], [38.5, 12.6, 0]]),
-                        "status": ("h_mm", [0, 0, 0, 0]), "wall_time_s": ("h_mm", [10.0, 20, 40, 90])},
-                       coords={"h_mm": [3.0, 2.5, 2.0, 1.5]}, attrs={"exercise": "TGE2"})
+    a2 = [[30.0, 10, 0], [37.0, 12, 0], [38.0, 12.5, 0], [38.5, 12.6, 0]]  # TGE2 by mesh
+    a1 = [[9.0, 0, 1], [10.5, 0, 1], [9.8, 0, 1], [9.6, 0, 1]]  # TGE1 by mesh
+    study = xr.Dataset({"angle_deg": (("h_mm", "exercise", "joint"), np.stack([a1, a2], axis=1)),
+                        "status": (("h_mm", "exercise"), np.zeros((4, 2), int)),
+                        "wall_time_s": (("h_mm", "exercise"), np.array([[10.0] * 2, [20] * 2, [40] * 2, [90] * 2]))},
+                       coords={"h_mm": [3.0, 2.5, 2.0, 1.5], "exercise": ["TGE1", "TGE2"]})
     h, why = FD.check_choice(study, 2.0, 2.0)
-    assert h == 2.5 and "TGE2" in why
+    assert h == 2.5 and "TGE1, TGE2" in why
+    h, _ = FD.check_choice(study, 1.0, 2.0)  # TGE1 is 0.9 deg off at 2.5 mm, TGE2 1.5: 2 mm
+    assert h == 2.0
     # a mesh whose contact penetrates beyond the bound is no valid check, however close its angles
-    study["max_penetration_mm"] = ("h_mm", [0.05, 0.2, 0.04, 0.03])
+    study["max_penetration_mm"] = (("h_mm", "exercise"), np.array([[0.05] * 2, [0.05, 0.2], [0.04] * 2, [0.03] * 2]))
     h, why = FD.check_choice(study, 2.0, 2.0, penetration_bound_mm=0.1)
     assert h == 2.0 and "penetration <= 0.1 mm" in why
     h, _ = FD.check_choice(None, 2.0, 1.75)

@@ -83,7 +83,8 @@ def test_editing_one_patient_reruns_only_that_patient(smoke):
     # only per-patient rules; the shared stages (DOE, moments, RSM, actuator sweeps) are reused
     per_patient = {"patient_loads", "track_patient", "cascade_plan", "fea_check", "joint_loads_table",
                    "cascade_plan_table",
-                   "stability_maps"}  # the maps summarise every patient's design range and plans
+                   "stability_maps",  # the maps summarise every patient's design range and plans
+                   "fidelity_choices"}  # and this table every patient's source of loads
     assert set(jobs) - {"all"} <= per_patient
     assert all(n == 1 for r, n in jobs.items() if r != "all")
     proc = _run(workdir, "-n", *cfgs, str(edited))

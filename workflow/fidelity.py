@@ -187,8 +187,8 @@ def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -
 
 def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: float,
                  penetration_bound_mm: float = np.inf) -> tuple[float, str]:
-    """(element size, why) for the FEA check: the cheapest mesh whose joint angles are within
-    ``tolerance_deg`` of the finest converged one in the check study (the config's without a study),
+    """(element size, why) for the FEA check: the cheapest mesh whose joint angles (every exercise of the
+    study) are within ``tolerance_deg`` of the finest converged one's (the config's without a study),
     among the meshes whose contact penetration stays within ``penetration_bound_mm``.
 
     ``study``: the dataset of :func:`workflow.fidelity_run.write_check_study`.
@@ -196,17 +196,18 @@ def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: fl
     if study is None:
         return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g} (fidelity.auto off)"
     c = study
-    hs, ang = c["h_mm"].values, c["angle_deg"].values
-    ok = c["status"].values == 0
+    hs = c["h_mm"].values
+    ang = c["angle_deg"].values  # (h, exercise, joint)
+    ok = np.all(c["status"].values == 0, axis=1)
     if "max_penetration_mm" in c:  # a mesh whose contact penetrates beyond the bound is not a valid check
-        ok &= ~(c["max_penetration_mm"].values > penetration_bound_mm)
-    wall = c["wall_time_s"].values
-    ex = str(c.attrs.get("exercise", ""))
+        ok &= ~np.any(c["max_penetration_mm"].values > penetration_bound_mm, axis=1)
+    wall = np.nanmean(c["wall_time_s"].values, axis=1)
+    ex = ", ".join(str(e) for e in c["exercise"].values)
     if not ok.any():
-        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g}: no mesh of the check study converged"
+        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g}: no mesh of the check study qualified"
     r = int(np.flatnonzero(ok)[np.argmin(hs[ok])])
-    err = np.where(ok, np.max(np.abs(ang - ang[r]), axis=1), np.nan)
+    err = np.where(ok, np.max(np.abs(ang - ang[r]), axis=(1, 2)), np.nan)
     ch = cheapest_within("fea_check", [f"check_h{h:g}" for h in hs], wall, err, tolerance_deg, converged=ok,
-                            unit="deg")
+                         unit="deg")
     pen = "" if not np.isfinite(penetration_bound_mm) else f", penetration <= {penetration_bound_mm:g} mm"
     return float(hs[[f"check_h{h:g}" for h in hs].index(ch.method)]), f"{ch.reason} (study: {ex}, finest h = {hs[r]:g} mm{pen})"

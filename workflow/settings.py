@@ -49,9 +49,9 @@ def check_config(config: Mapping[str, Any]) -> None:
     if dummy and config["patients"][dummy].get("model", "human") != "dummy":
         raise ConfigError(f"cascade.dummy_patient = {dummy!r}: that patient needs `model: dummy`")
     fid = config.get("fidelity", {})
-    ex = fid.get("check", {}).get("exercise")
-    if ex and ex not in config["exercises"]:
-        raise ConfigError(f"fidelity.check.exercise = {ex!r}: no such exercise (exercises: {sorted(config['exercises'])})")
+    for ex in fid.get("check", {}).get("exercises", []):
+        if ex not in config["exercises"]:
+            raise ConfigError(f"fidelity.check.exercises: {ex!r} is no exercise (exercises: {sorted(config['exercises'])})")
     for k, case in enumerate(fid.get("fem_cases", [])):
         models = {c["model"] for c in fid["fem_cases"] if c["contact"]}
         if case["model"] not in models:
