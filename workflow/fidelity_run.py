@@ -24,6 +24,7 @@ import numpy as np
 import xarray as xr
 
 from workflow import fidelity as FD
+from workflow.fem_study import P_STUDY
 from workflow.provenance import write_dataset
 
 __all__ = ["fem_table", "write_fem_choice", "write_msk_study",
@@ -31,7 +32,6 @@ __all__ = ["fem_table", "write_fem_choice", "write_msk_study",
 
 log = logging.getLogger(__name__)
 
-P_STUDY = (60.0, 180.0, 300.0)  # as workflow.fem_study
 
 
 # --------------------------------------------------------------------------
