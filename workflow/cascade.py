@@ -87,6 +87,7 @@ __all__ = [
     "plans_dataset",
     "patient_finger",
     "patient_cascade",
+    "plan_options",
     "write_cascade_plan",
 ]
 
@@ -742,6 +743,18 @@ def patient_cascade(finger: Finger, unit: Any, cascade_cfg: Mapping[str, Any],
     )
 
 
+def plan_options(cascade_cfg: Mapping[str, Any], active_limits_nm: Sequence[float] | None) -> dict[str, Any]:
+    """Keywords of :func:`plan_exercise` from the config's ``cascade`` section and the patient's active limits (N m).
+
+    One definition for the plan, the FEA check's correction step and the
+    speed-accuracy study's plans, so all three plan alike.
+    """
+    c = cascade_cfg
+    return {"tol_deg": float(c["tolerance_deg"]), "p_max_kpa": float(c["p_max_kpa"]),
+            "tie_cmc_mcp": bool(c["tie_cmc_mcp"]), "margin_deg": float(c["margin_deg"]),
+            "active_limits_nm": None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float))}
+
+
 def write_cascade_plan(
     patient_name: str,
     patient: Mapping[str, Any],
@@ -790,8 +803,7 @@ def write_cascade_plan(
     t0 = time.perf_counter()
     plans = []
     for name, t in targets.items():
-        p = plan_exercise(model, t, exercise=name, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
-                          p_max_kpa=c["p_max_kpa"], tie_cmc_mcp=c["tie_cmc_mcp"], margin_deg=c["margin_deg"])
+        p = plan_exercise(model, t, exercise=name, **plan_options(c, limits))
         log.info("%s: %s pressures %s kPa, predicted %s deg (target %s) %s", name,
                  "reached" if p.achieved else "NOT reached", np.round(p.pressures_kpa, 1),
                  np.round(p.equilibrium.joint_angles_deg, 1), t, p.reason)

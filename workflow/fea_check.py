@@ -469,7 +469,7 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
     the reduced-order chains are built too: the 2D-unit prediction and the
     correction step (config ``fea_check.correction``).
     """
-    from workflow.cascade import patient_cascade, patient_finger
+    from workflow.cascade import patient_cascade, patient_finger, plan_options
     from workflow.fea_model import build_patient_fea
     from workflow.provenance import write_dataset
 
@@ -494,10 +494,8 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
         ro_2d = patient_cascade(finger, load_unit_model(surrogate_2d, **unit_model_cfg), cascade_cfg, upg)
         ro_plan = patient_cascade(finger, load_unit_model(units[cascade_cfg.get("surrogate", "3d")], **unit_model_cfg),
                                   cascade_cfg, upg)
-    plan_opts = {"tol_deg": float(cascade_cfg["tolerance_deg"]), "p_max_kpa": float(cascade_cfg["p_max_kpa"]),
-                 "tie_cmc_mcp": bool(cascade_cfg["tie_cmc_mcp"]), "margin_deg": float(cascade_cfg["margin_deg"]),
-                 "active_limits_nm": np.abs(plan["active_limit_nm"].sel(joint=list(JOINTS)).values)
-                 if "active_limit_nm" in plan else None}
+    plan_opts = plan_options(cascade_cfg, plan["active_limit_nm"].sel(joint=list(JOINTS)).values
+                             if "active_limit_nm" in plan else None)
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     ds, checks, grav, corrections = run_fea_check(fea, plan, exercises=fea_cfg.get("exercises") or None, solver=solver,

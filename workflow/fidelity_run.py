@@ -101,7 +101,7 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
     models = sorted(set(table["model"].values.tolist()))
     chosen, reason, h, contact, met = [], [], [], [], []
     for model in models:
-        sel = table.where(table["model"] == model, drop=True)
+        sel = _model_cases(table, model)
         names = [str(n) for n in sel["case"].values]
         worst = (sel["error"] / bound).max("quantity", skipna=True).values
         conv = sel["converged"].values.astype(bool)
@@ -117,7 +117,7 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
         h.append(case.h_mm)
         contact.append(case.contact)
         met.append(ch.met_tolerance)
-        log.info("FE %s: %s", model, ch.reason)
+        log.info("FE %s: %s", model, reason[-1])
     ds = table.assign(
         chosen_case=("model_choice", np.array(chosen, dtype=object), {"units": "1", "long_name": "FE case the sweeps and the unit check use"}),
         chosen_h_mm=("model_choice", np.array(h), {"units": "mm", "long_name": "chosen element size"}),
@@ -315,6 +315,21 @@ def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequen
 # --------------------------------------------------------------------------
 # Everything on one table
 # --------------------------------------------------------------------------
+def _model_cases(table: xr.Dataset, model: str) -> xr.Dataset:
+    """The FE table's rows of one model (2d / 3d)."""
+    return table.isel(case=np.flatnonzero(table["model"].values == model))
+
+
+def _reference_values(fem: xr.Dataset, model: str) -> dict[str, float]:
+    """Per unit quantity, the value of the model's reference case (the one with error 0)."""
+    sel = _model_cases(fem, model)
+    out = {}
+    for q in FD.UNIT_QUANTITIES:
+        r = np.flatnonzero(sel["error"].sel(quantity=q).values == 0.0)
+        out[q] = float(sel["value"].sel(quantity=q).values[r[0]]) if r.size else np.nan
+    return out
+
+
 def _surrogate_rows(responses: Mapping[str, str], fem: xr.Dataset, surrogates_cfg: Mapping, cv: xr.Dataset):
     """Every regressor of each sweep, fitted on all its samples, at the unit study points."""
     from workflow.surrogates import fit_surrogate
@@ -323,7 +338,7 @@ def _surrogate_rows(responses: Mapping[str, str], fem: xr.Dataset, surrogates_cf
     for fea, path in responses.items():
         resp = xr.load_dataset(path)
         sweep_time = float(resp["wall_time_s"].sum())
-        ref = fem.where(fem["model"] == fea, drop=True)
+        ref = _reference_values(fem, fea)
         for reg in [str(r) for r in cv["regressor"].values]:
             t0 = time.perf_counter()
             s = fit_surrogate(resp, reg, fea=fea, k=int(surrogates_cfg["k"]), random_state=int(surrogates_cfg["random_state"]))
@@ -385,12 +400,8 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
         family.append(fam)
         wall.append(q_t)
         setup.append(s_t)
-        for j, q in enumerate(FD.UNIT_QUANTITIES):
-            rv = ref["value"].values[:, j]
-            rc = ref["reference_case"].values[:, j]
-            k = [i for i, n in enumerate(ref["case"].values) if str(n) == str(rc[0])] if rc.size else []
-            e = FD.relative_errors(qv[q], rv[k[0]]) if k else np.nan
-            cells[name, q] = (qv[q], float(e))
+        for q in FD.UNIT_QUANTITIES:
+            cells[name, q] = (qv[q], float(FD.relative_errors(qv[q], ref.get(q, np.nan))))
         fea, reg = name.split("_", 2)[1], name.split("_", 2)[2]
         for t in ("angle", "moment"):
             c = cv.sel(fea=fea, regressor=reg, target=t)
@@ -398,7 +409,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             cells[name, f"cv_{t}"] = (float(c["rmse"].mean("fold")), nrmse)
 
     if plan_inputs:
-        from workflow.cascade import patient_cascade, patient_finger, plan_exercise
+        from workflow.cascade import patient_cascade, patient_finger, plan_options, plan_patient
         from workflow.unit_model import UnitModel
 
         pi = plan_inputs
@@ -406,7 +417,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
         finger, _ = patient_finger(pi["patient"], loads, xr.load_dataset(pi["moments"]), xr.load_dataset(pi["ccd"]),
                                    cascade_cfg=pi["cascade"], anthropometry=pi["anthropometry"])
         c = pi["cascade"]
-        limits = np.abs(loads["active_limit_nm"].values)
+        opts = plan_options(c, loads["active_limit_nm"].values)
         targets = {str(e): loads["target_angle_deg"].sel(exercise=e).values for e in loads["exercise"].values}
         plan_fea = c.get("surrogate", "3d")
         cand = [r for r in rows if r[1] == f"surrogate_{plan_fea}"]
@@ -417,10 +428,8 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             unit = UnitModel.from_surrogate(s, **pi["unit_model"])
             ro = patient_cascade(finger, unit, c)
             t0 = time.perf_counter()
-            plans[name] = {e: plan_exercise(ro, t, exercise=e, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
-                                            p_max_kpa=c["p_max_kpa"], tie_cmc_mcp=c["tie_cmc_mcp"],
-                                            margin_deg=c["margin_deg"]).pressures_kpa for e, t in targets.items()}
-            t_plan = time.perf_counter() - t0
+            plans[name] = {p.exercise: p.pressures_kpa for p in plan_patient(ro, targets, **opts)}
+            t_plan = (time.perf_counter() - t0) / len(targets)  # one evaluation = one exercise's plan
             pm = name.replace("surrogate_", "plan_")
             methods.append(pm)
             family.append("plan")
