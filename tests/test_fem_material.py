@@ -5,7 +5,7 @@ import pytest
 
 from workflow import fem
 
-C10, C01, C20 = 0.2605676, 0.2975498, 0.15750069  # MPa, Table 5
+C10, C01, C20 = 0.26056762, 0.09754981, 0.05750069  # MPa, Table 5 (resources/table05_*.csv)
 MAT = fem.material_constants({})
 
 
@@ -129,3 +129,22 @@ def test_pressure_resultant_on_closed_square_is_zero_and_scales_with_area():
     ft, _ = fem.pressure_load(mesh.p, top, 0.2)
     # the cavity's roof is pushed up (+y) by p * 1 mm
     np.testing.assert_allclose(ft.sum(axis=(0, 1)), [0.0, 0.2], atol=1e-14)
+
+
+def test_silicone_constants_are_table_5():
+    """config, schema default and workflow.fem all hold Table 5 as carried into resources/ (MPa)."""
+    import pandas as pd
+    import yaml
+
+    from workflow.settings import REPO_ROOT
+
+    t = pd.read_csv(REPO_ROOT / "resources" / "table05_mooney_rivlin_smooth_sil_950.csv").set_index("parameter")
+    want = {f"{k.lower()}_mpa": float(t.loc[k, "value"]) * 1e-6 for k in ("C10", "C01", "C20")}
+    cfg = yaml.safe_load((REPO_ROOT / "config" / "config.yaml").read_text())["actuator"]["material"]
+    schema = yaml.safe_load((REPO_ROOT / "config" / "schema.yaml").read_text())
+    defaults = schema["properties"]["actuator"]["properties"]["material"]["properties"]
+    for key, value in want.items():
+        assert cfg[key] == pytest.approx(value, rel=1e-9)
+        assert defaults[key]["default"] == pytest.approx(value, rel=1e-9)
+        assert fem.DEFAULT_MATERIAL[key] == pytest.approx(value, rel=1e-9)
+    assert fem.material_constants({})["mu0"] == pytest.approx(0.716, abs=5e-4)

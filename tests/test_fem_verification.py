@@ -9,7 +9,7 @@ from skfem.helpers import ddot, div, sym_grad, trace
 
 from workflow import fem
 
-C10, C01, C20 = 0.2605676, 0.2975498, 0.15750069  # MPa, Table 5
+C10, C01, C20 = 0.26056762, 0.09754981, 0.05750069  # MPa, Table 5 (resources/table05_*.csv)
 MAT = fem.material_constants({})
 
 

@@ -69,11 +69,12 @@ from ._solve import DEFAULT_SOLVER, Model, solve_path
 __all__ = ["DEFAULT_MATERIAL", "DEFAULT_CONTACT", "CASES", "END_HOLDS", "material_constants", "UnitResult", "solve_unit",
            "unit_model", "held_end_nodes", "clamp_rotation", "clamp_inclination_deg"]
 
-#: Table 5 Mooney-Rivlin constants (MPa), bulk modulus ratio K/mu0, paper layer.
+#: Table 5 Mooney-Rivlin constants of Smooth-Sil 950 (MPa; C10 = 260,567.62, C01 = 97,549.81,
+#: C20 = 57,500.69 Pa, mu0 = 0.716 MPa), bulk modulus ratio K/mu0, paper layer (section 2.3).
 DEFAULT_MATERIAL = {
-    "c10_mpa": 0.2605676,
-    "c01_mpa": 0.2975498,
-    "c20_mpa": 0.15750069,
+    "c10_mpa": 0.26056762,
+    "c01_mpa": 0.09754981,
+    "c20_mpa": 0.05750069,
     "bulk_ratio": 1000.0,  # K = bulk_ratio * mu0, mu0 = 2 (c10 + c01)
     "paper_e_mpa": 1200.0,
     "paper_nu": 0.2,
