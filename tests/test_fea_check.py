@@ -32,7 +32,9 @@ def test_actuator_mesh_is_the_unit_chain_with_group_sets():
     assert big.length == pytest.approx(5 * 6.8 + 4 * 1.0)
     n_cmc, n_mcp = len(big.facets["cavity_top_CMC"]), len(big.facets["cavity_top_MCP"])
     assert n_cmc * 3 == n_mcp * 2 and n_cmc + n_mcp == len(big.facets["cavity_top"])
-    assert len(big.contact_pairs) == 2 * 4  # every gap, both sides
+    # self-contact of every gap and every pocket, both sides
+    assert sorted(big.contact_surfaces) == sorted([f"gap_{s}{k}" for s in ("top", "bottom") for k in range(4)]
+                                                  + [f"pocket_{s}{k}" for s in ("top", "bottom") for k in range(5)])
 
 
 def _pivot_points(theta):
@@ -287,7 +289,8 @@ def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
         curve = np.column_stack([np.linspace(0, um.length, 5), np.zeros(5)] + ([np.zeros(5)] if um.dim == 3 else []))
         return SimpleNamespace(status=0 if ok else 1, load_factor=1.0 if ok else 0.4, tip_angle_deg=10.0 if ok else 4.0,
                                backbone_mm=curve, backbone_ref_mm=curve, newton_iterations=5, wall_time_s=1.0,
-                               ndofs=int(um.mesh.p.size))
+                               ndofs=int(um.mesh.p.size), max_penetration_mm=0.01, overlap_depth_mm=0.0,
+                               min_pocket=30.0)
 
     monkeypatch.setattr(FS, "solve_standalone", fake_solve)
     plan = xr.Dataset({"pressure_kpa": (("exercise", "group", "chamber"), np.zeros((1, 4, 2))),

@@ -132,3 +132,70 @@ def test_threads_give_the_same_assembly():
     np.testing.assert_array_equal(one[0], two[0])
     np.testing.assert_array_equal(one[1], two[1])
     assert one[2] == two[2]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_enhanced_strains_condense_exactly(dim):
+    # enhanced (incompatible-mode) parameters in every material id, at a state with r_alpha != 0: the residual
+    # is the energy's gradient in the full state, and along [du; recover(du)] the nodal residual changes by
+    # K_c du + correction while r_alpha changes by -r_alpha (the Newton step of the static condensation)
+    mesh, material, u = _deformed_mesh(dim)
+    solid = fem.SolidAssembler(mesh, material, MAT, enhanced=(0, 1, 2))
+    rng = np.random.default_rng(dim)
+    state = np.concatenate([u, 0.01 * rng.standard_normal(solid.n_internal)])
+    assert solid.n_internal == dim * dim * mesh.t.shape[1]
+    f, k, jmin = solid.assemble(state)
+    assert jmin > 0.5
+    n = solid.ndofs
+    d = 1e-6 * rng.standard_normal(solid.nstate)
+    dE = (solid.energy(state + d) - solid.energy(state - d)) / 2
+    assert dE == pytest.approx(f @ d, rel=1e-6)
+    K = _assembly.Pattern(solid.rows, solid.cols, n).matrix(k)
+    corr = solid.condensed_correction().copy()
+    du = rng.standard_normal(n)
+    step = np.concatenate([du, solid.recover(du)])
+    fp, _, _ = solid.assemble(state + EPS * step, False)
+    fm, _, _ = solid.assemble(state - EPS * step, False)
+    dfdt = (fp - fm) / (2 * EPS)
+    np.testing.assert_allclose(dfdt[:n], K @ du + corr, atol=1e-6 * np.abs(K @ du).max())
+    np.testing.assert_allclose(dfdt[n:], -f[n:], atol=1e-6 * np.abs(f[n:]).max())
+
+
+def test_enhanced_paper_layer_bends_exactly_on_one_element_through_its_thickness():
+    # pure bending of a paper strip (neo-Hooke, nu = 0.2) one element thick at aspect 5: plain Q1 locks,
+    # the incompatible modes reproduce beam theory (see tests/test_fem_beam.py for the laminate)
+    xs, ys = np.linspace(0.0, 5.0, 6), np.array([-0.1, 0.1])
+    mesh, _, _ = fem.build_grid_mesh([xs, ys])
+    mat = fem.material_constants({})
+    p = mesh.p
+    lam, mu = mat["paper_lambda"], mat["paper_mu"]
+    E = mu * (3 * lam + 2 * mu) / (lam + mu)
+    nu = lam / (2 * (lam + mu))
+    kappa = 1e-5  # 1/mm: the exact linear field u = (kappa x y, -kappa x^2/2 - nu' kappa y^2/2) is an equilibrium
+    out = {}
+    for enhanced in ((), (1,)):
+        solid = fem.SolidAssembler(mesh, np.ones(mesh.t.shape[1], int), mat, enhanced=enhanced)
+        M = kappa * E / (1 - nu**2) * 0.2**3 / 12  # N mm / mm
+        root, tip = np.flatnonzero(p[0] == 0.0), np.flatnonzero(p[0] == 5.0)
+        f = np.zeros(2 * p.shape[1])
+        f[2 * tip] = M / 0.2 * np.sign(p[1, tip])  # the end couple as two opposite nodal forces
+        fixed = np.concatenate([2 * root, [2 * root[0] + 1]])
+        model = fem.Model(solid, fixed=fixed, extras=[_Load(f)])
+        res = fem.solve_path(model, p, {"initial_step": 1.0})
+        x = model.positions(res.state, p)
+        top, bot = tip[np.argmax(p[1, tip])], tip[np.argmin(p[1, tip])]
+        out[enhanced] = (x[0, top] - x[0, bot]) / 0.2  # end-face rotation, = kappa L in beam theory
+    exact = kappa * 5.0
+    assert out[(1,)] == pytest.approx(exact, rel=1e-3)
+    assert out[()] < 0.2 * exact
+
+
+class _Load:
+    def __init__(self, f):
+        self.f = f
+
+    def evaluate(self, x, u, lam, tangent):
+        return -lam * self.f, None
+
+    def external(self, x, u, lam):
+        return lam * self.f

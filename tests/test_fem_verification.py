@@ -115,7 +115,8 @@ def test_small_load_agrees_with_linear_elasticity():
     um = fem.build_unit_mesh(h=1.0, dim=2)
     p_kpa = 0.01
     lin = _linear_unit_angle(um, p_kpa * 1e-3)
-    res = fem.solve_unit(um, p_kpa, 0.0, "free", contact=False, solver={"initial_step": 1.0})
+    # the same element technology as the forms: mean-dilatation Q1 everywhere (no enhanced strains)
+    res = fem.solve_unit(um, p_kpa, 0.0, "free", contact=False, solver={"initial_step": 1.0}, formulation="mixed")
     assert res.status == 0
     assert lin > 0
     assert res.bending_angle_total_deg == pytest.approx(lin, rel=2e-3)
@@ -127,7 +128,8 @@ def test_plain_q1_locks_where_mean_dilatation_does_not():
     ang = {}
     for mixed in (True, False):
         for ratio in (1e3, 1e4):
-            r = fem.solve_unit(um, 0.01, 0.0, "free", False, material={"bulk_ratio": ratio}, mixed=mixed, solver=one)
+            r = fem.solve_unit(um, 0.01, 0.0, "free", False, material={"bulk_ratio": ratio},
+                               formulation="mixed" if mixed else "displacement", solver=one)
             ang[mixed, ratio] = r.bending_angle_deg
     # locking-free: insensitive to K in the incompressible limit
     assert ang[True, 1e4] == pytest.approx(ang[True, 1e3], rel=2e-2)

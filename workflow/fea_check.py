@@ -238,7 +238,7 @@ def check_exercise(fea: PatientFEA, name: str, pressures_kpa: np.ndarray, solver
     t0 = time.perf_counter()
     tracemalloc.start()
     p = {g: (float(pressures_kpa[i, 0]), float(pressures_kpa[i, 1])) for i, g in enumerate(GROUPS)}
-    res = solve_coupled(fea.setup, p, solver=solver, u_gravity=None if gravity is None else gravity.u)
+    res = solve_coupled(fea.setup, p, solver=solver, u_gravity=None if gravity is None else gravity.state)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     W = fea.width_mm

@@ -146,8 +146,7 @@ def build_patient_fea(finger: Finger, units_per_group: Mapping[str, int], *, act
     geom.update(dict(actuator_cfg.get("geometry", {})))
     W = float(geom["width"])
     counts = {g: int(units_per_group[g]) for g in GROUPS}
-    act = build_actuator_mesh(geom, counts, h=float(fc["h_actuator_mm"]), dim=2,
-                              paper_layers=int(actuator_cfg.get("mesh", {}).get("paper_layers", 1)))
+    act = build_actuator_mesh(geom, counts, h=float(fc["h_actuator_mm"]), dim=2, **fem.layer_options(actuator_cfg))
     ref_dims = {k: float(v) for k, v in reference_dims_mm.items()}
     profiles = finger_profiles(finger, cascade_cfg["section_points"], ref_dims, fc["tip_min_depth_ratio"])
     fm = build_finger_mesh(profiles, h=float(fc["h_finger_mm"]))
@@ -183,11 +182,13 @@ def build_patient_fea(finger: Finger, units_per_group: Mapping[str, int], *, act
     contact = dict(fem.DEFAULT_CONTACT)
     contact.update(dict(actuator_cfg.get("contact", {})))
     contact.pop("enabled", None)
-    contact["finger_penalty"] = float(fc["finger_penalty_factor"]) * mu_f / float(fc["h_finger_mm"])
+    # as the silicone's: eps = factor mu / (1 mm), the same on every finger mesh
+    contact["finger_penalty"] = float(fc["finger_penalty_factor"]) * mu_f / 1.0
     setup = CoupledSetup(
         cm=cm, mat=mat, springs=[spring_callables(s, W) for s in finger.springs],
         strap_k=float(cascade_cfg["strap_stiffness_n_per_m"]) * 1e-3 / W, gravity=gravity if g > 0 else None,
-        contact=contact, slide_k=float(fc["slide_stiffness_n_per_mm"]))
+        contact=contact, slide_k=float(fc["slide_stiffness_n_per_mm"]),
+        formulation=actuator_cfg.get("formulation", fem.DEFAULT_FORMULATION))
     notes = (f"plane strain per mm of actuator width W = {W:g} mm; finger weights {np.round([target[k] * W for k in range(3)], 5)} N, "
              f"actuator {target[-1] * W:.4g} N; strap {setup.strap_k:g} N/mm per mm; flesh mu {mu_f:.4g} MPa; "
              f"{cm.mesh.p.shape[1] * 2} dofs")

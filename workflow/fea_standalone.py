@@ -68,11 +68,14 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
     meshes = {}
     mat = actuator_cfg.get("material")
     contact = {k: v for k, v in dict(actuator_cfg.get("contact", {})).items() if k != "enabled"}
-    layers = int(actuator_cfg.get("mesh", {}).get("paper_layers", 1))
+    layers = fem.layer_options(actuator_cfg)
+    formulation = actuator_cfg.get("formulation", fem.DEFAULT_FORMULATION)
+    pen, overlap = np.full(shape, np.nan), np.full(shape, np.nan)
+    pocket = {2: np.full(shape, np.nan), 3: np.full(shape, np.nan)}
 
     def mesh(dim, h):
         if (dim, h) not in meshes:
-            meshes[dim, h] = build_actuator_mesh(geom, upg, h=h, dim=dim, paper_layers=layers)
+            meshes[dim, h] = build_actuator_mesh(geom, upg, h=h, dim=dim, **layers)
         return meshes[dim, h]
 
     for j, m in enumerate(models):
@@ -82,7 +85,8 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
             press = {g: (float(pk[k, 0]), float(pk[k, 1])) for k, g in enumerate(GROUPS)}
             t_case = 0.0
             for h in (h3_list if dim == 3 else [float(h_2d_mm)]):
-                r = solve_standalone(mesh(dim, h), press, material=mat, contact_options=contact, solver=solver)
+                r = solve_standalone(mesh(dim, h), press, material=mat, contact_options=contact, solver=solver,
+                                     formulation=formulation)
                 t_case += r.wall_time_s
                 log.info("%s %s (h = %g mm, %d dofs): tip %.1f deg, status %d at %.3f, %d its, %.1f s", ex, m, h,
                          r.ndofs, r.tip_angle_deg, r.status, r.load_factor, r.newton_iterations, r.wall_time_s)
@@ -91,6 +95,7 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
             bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)
             tip[i, j], lam[i, j], status[i, j] = r.tip_angle_deg, r.load_factor, r.status
             its[i, j], wall[i, j], ndofs[i, j], h_used[i, j] = r.newton_iterations, t_case, r.ndofs, h
+            pen[i, j], overlap[i, j], pocket[dim][i, j] = r.max_penetration_mm, r.overlap_depth_mm, r.min_pocket
     flag_vals = np.array(sorted(fem.STATUS_FLAGS), dtype="i1")
     map_vals = np.array(sorted(MAPPING_FLAGS), dtype="i1")
     ds = xr.Dataset(
@@ -105,6 +110,10 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
             "newton_iterations": (("exercise", "model"), its, {"units": "1", "long_name": "Newton iterations"}),
             "wall_time_s": (("exercise", "model"), wall, {"units": "s", "long_name": "wall time of the solves (incl. coarser meshes that failed)"}),
             "ndofs": (("exercise", "model"), ndofs, {"units": "1", "long_name": "degrees of freedom of the mesh kept"}),
+            "max_penetration_mm": (("exercise", "model"), pen, {"units": "mm", "long_name": "largest penetration over the path (contact or overlap check)"}),
+            "overlap_depth_mm": (("exercise", "model"), overlap, {"units": "mm", "long_name": "deepest boundary node inside another element over the path"}),
+            "min_pocket_area_mm2": (("exercise", "model"), pocket[2], {"units": "mm2", "long_name": "smallest pocket area over the path (2D models)"}),
+            "min_pocket_volume_mm3": (("exercise", "model"), pocket[3], {"units": "mm3", "long_name": "smallest pocket volume over the path (3D models)"}),
             "h_used_mm": (("exercise", "model"), h_used, {"units": "mm", "long_name": "element size kept (3D: the coarsest that converged, else the finest tried)"}),
             "pressure_plan_kpa": (("exercise", "group", "chamber"), p_plan, {"units": "kPa", "long_name": "planned (3D) pressure"}),
             "pressure_2d_kpa": (("exercise", "group", "chamber"), p2, {"units": "kPa", "long_name": "2D pressure of the mapping"}),

@@ -39,12 +39,10 @@ def fe_ray_solver(actuator: Mapping[str, Any]):
     def solve(variant, p_top, p_bottom, stops):
         h = float(variant["h_mm"])
         if h not in meshes:
-            mesh_cfg = dict(actuator.get("mesh", {}))
-            meshes[h] = fem.build_unit_mesh(actuator.get("geometry"), h=h, dim=2,
-                                            paper_layers=mesh_cfg.get("paper_layers", 1))
+            meshes[h] = fem.build_unit_mesh(actuator.get("geometry"), h=h, dim=2, **fem.layer_options(actuator))
         return fem.solve_unit(meshes[h], p_top, p_bottom, "free", bool(variant["contact"]),
                               material=actuator.get("material"), contact_options=contact_opts,
-                              solver=actuator.get("solver"), mixed=variant["formulation"] == "mixed", stops=stops)
+                              solver=actuator.get("solver"), formulation=variant["formulation"], stops=stops)
 
     return solve
 

@@ -35,22 +35,27 @@ N m for the reported moments).
 """
 
 from ._assembly import SolidAssembler
-from ._config import solve_unit_from_config, unit_check, unit_mesh_from_config, write_deformed_vtu, write_unit_check
+from ._config import layer_options, solve_unit_from_config, unit_check, unit_mesh_from_config, write_deformed_vtu, write_unit_check
 from ._contact import ContactPair
 from ._material import mooney_rivlin_isochoric, neo_hooke_compressible
-from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh
+from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh, layer_counts
 from ._pressure import pressure_load
 from ._solve import DEFAULT_SOLVER, STATUS_FLAGS, Model, PathResult, linear_solve, solve_path
-from ._unit import (CASES, DEFAULT_CONTACT, DEFAULT_MATERIAL, END_HOLDS, UnitResult, clamp_inclination_deg, clamp_rotation,
-                    held_end_nodes, material_constants, solve_unit, unit_model)
+from ._overlap import overlap_depth, overlap_measures, pocket_sizes
+from ._unit import (CASES, DEFAULT_CONTACT, DEFAULT_END_HOLD, DEFAULT_FORMULATION, DEFAULT_MATERIAL, END_HOLDS,
+                    FORMULATIONS, UnitResult, clamp_inclination_deg, clamp_rotation, contact_penalty, held_end_nodes,
+                    material_constants, solid_assembler, solve_unit, unit_model)
 
 __all__ = [
     "CASES",
     "DEFAULT_CONTACT",
+    "DEFAULT_END_HOLD",
+    "DEFAULT_FORMULATION",
     "DEFAULT_GEOMETRY",
     "DEFAULT_MATERIAL",
     "DEFAULT_SOLVER",
     "END_HOLDS",
+    "FORMULATIONS",
     "STATUS_FLAGS",
     "ContactPair",
     "Model",
@@ -62,12 +67,19 @@ __all__ = [
     "build_unit_mesh",
     "clamp_inclination_deg",
     "clamp_rotation",
+    "contact_penalty",
     "held_end_nodes",
+    "layer_counts",
+    "layer_options",
     "linear_solve",
     "material_constants",
     "mooney_rivlin_isochoric",
     "neo_hooke_compressible",
+    "overlap_depth",
+    "overlap_measures",
+    "pocket_sizes",
     "pressure_load",
+    "solid_assembler",
     "solve_path",
     "solve_unit",
     "solve_unit_from_config",

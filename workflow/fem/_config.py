@@ -11,18 +11,24 @@ import xarray as xr
 
 from ._mesh import build_unit_mesh
 from ._solve import STATUS_FLAGS
-from ._unit import UnitResult, solve_unit
+from ._unit import DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
 
-__all__ = ["unit_mesh_from_config", "solve_unit_from_config", "unit_check", "write_unit_check", "write_deformed_vtu"]
+__all__ = ["layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check", "write_unit_check", "write_deformed_vtu"]
 
 log = logging.getLogger(__name__)
+
+
+def layer_options(actuator: Mapping) -> dict:
+    """``paper_layers`` / ``base_layers`` of ``actuator.mesh`` (None = the mesh rule's default)."""
+    mesh = dict(actuator.get("mesh", {}))
+    return {"paper_layers": mesh.get("paper_layers"), "base_layers": mesh.get("base_layers")}
 
 
 def unit_mesh_from_config(actuator: Mapping, dim: int):
     """The unit mesh of the config (``actuator.geometry``, ``actuator.mesh.h_{2d,3d}_mm``)."""
     mesh = dict(actuator.get("mesh", {}))
     h = mesh.get("h_2d_mm", 1.0) if dim == 2 else mesh.get("h_3d_mm", 2.0)
-    return build_unit_mesh(actuator.get("geometry"), h=h, dim=dim, paper_layers=mesh.get("paper_layers", 1))
+    return build_unit_mesh(actuator.get("geometry"), h=h, dim=dim, **layer_options(actuator))
 
 
 def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bottom_kpa: float, case: str = "free",
@@ -33,7 +39,8 @@ def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bott
     """
     contact = dict(actuator.get("contact", {}))
     enabled = contact.pop("enabled", True)
-    kwargs.setdefault("end_hold", actuator.get("end_hold", "backbone"))
+    kwargs.setdefault("end_hold", actuator.get("end_hold", DEFAULT_END_HOLD))
+    kwargs.setdefault("formulation", actuator.get("formulation", DEFAULT_FORMULATION))
     return solve_unit(
         mesh if mesh is not None else unit_mesh_from_config(actuator, dim),
         p_top_kpa, p_bottom_kpa, case, enabled,

@@ -110,19 +110,45 @@ def _segment_2d(X: np.ndarray, has_prev: np.ndarray, has_next: np.ndarray):
     return xi, n, g
 
 
-class ContactPair:
-    """One-way contact of the nodes of ``slave_facets`` against ``master_facets``.
+def _excluded(facets: np.ndarray, nodes: np.ndarray) -> list[set]:
+    """Per node, the facets of ``facets`` it must not pair with: those touching its star's nodes.
 
-    Several pairs of walls can share one object (lists of facet arrays, the
-    k-th slave wall against the k-th master wall only): one vectorised
-    evaluation for all gaps instead of one per pair.
+    The star of a node is the set of facets containing it; a facet that shares
+    a node with the star (the node's own facets and their neighbours) lies
+    next to the node on the same surface, where a gap is meaningless.
+    """
+    by_node: dict[int, set] = {}
+    for k, f in enumerate(facets):
+        for a in f:
+            by_node.setdefault(int(a), set()).add(k)
+    out = []
+    for s in nodes:
+        ring = {int(a) for k in by_node[int(s)] for a in facets[k]}
+        out.append(set().union(*(by_node[a] for a in ring)))
+    return out
+
+
+class ContactPair:
+    """Penalty contact of slave nodes against master facets, each slave against its own pool of facets.
+
+    Two ways to build one (``evaluate`` vectorises over all of it):
+
+    * ``ContactPair(p, slave_facets, master_facets)``: the nodes of the k-th
+      slave wall against the k-th master wall only (walls must not share
+      nodes), e.g. the actuator's skin against the finger's.
+    * ``ContactPair.self_contact(p, surfaces)``: every node of a surface
+      against every facet of the same surface except the facets next to it
+      (``_excluded``: a facet never pairs with its own nodes or its
+      neighbours), e.g. the closed wall loop of a pocket or the U of a gap, so
+      that any two parts of it that meet are kept apart, opposite walls as well
+      as a corner folding onto itself.
 
     Parameters
     ----------
     p : ndarray (dim, nnodes)
         Reference coordinates (for tributary areas), mm.
     slave_facets, master_facets : ndarray or list of ndarray
-        Outward-oriented facets of the facing walls (walls must not share nodes).
+        Outward-oriented facets of the facing walls.
     search : float
         Largest |g| (mm) at which a penetrating node is still taken as in
         contact with a master facet (guards against far-away facets).
@@ -142,33 +168,50 @@ class ContactPair:
         ``evaluate`` (the model's), e.g. a softer contact with flesh.
     """
 
-    def __init__(self, p: np.ndarray, slave_facets: np.ndarray, master_facets: np.ndarray, search: float = 1.0,
-                 extend: float = 0.5, smoothing: float = 0.0, smooth_normals: bool = True, penalty_factor: float = 1.0):
-        self.dim = p.shape[0]
-        self.penalty_factor = float(penalty_factor)
-        self.smoothing = float(smoothing)
-        self.smooth_normals = bool(smooth_normals)
+    def __init__(self, p: np.ndarray, slave_facets, master_facets, search: float = 1.0, extend: float = 0.5,
+                 smoothing: float = 0.0, smooth_normals: bool = True, penalty_factor: float = 1.0):
         slaves = slave_facets if isinstance(slave_facets, (list, tuple)) else [slave_facets]
         masters = master_facets if isinstance(master_facets, (list, tuple)) else [master_facets]
         if len(slaves) != len(masters):
             raise ValueError("one master wall per slave wall")
         trib = [_tributary(p, f) for f in slaves]
-        self.slave = np.concatenate([nd for nd, _ in trib])
-        self.area = np.concatenate([a for _, a in trib])
-        master_facets = np.concatenate(masters)
-        self.master = master_facets
-        # slaves only see their own master wall: per slave the facet ids of that
-        # wall (padded by repeating its first facet, masked by a large distance)
         starts = np.cumsum([0] + [f.shape[0] for f in masters])
-        width = max(f.shape[0] for f in masters)
-        pool, pad = [], []
-        for k, (nd, _) in enumerate(trib):
-            ids = np.arange(starts[k], starts[k + 1])
-            row = np.concatenate([ids, np.full(width - ids.size, ids[0])])
-            pool.append(np.repeat(row[None], nd.size, axis=0))
-            pad.append(np.repeat((np.arange(width) >= ids.size)[None], nd.size, axis=0))
-        self._pool = np.concatenate(pool)  # (ns, width) facet ids
-        self._pad = np.where(np.concatenate(pad), 1e9, 0.0)
+        pools = [[np.arange(starts[k], starts[k + 1])] * nd.size for k, (nd, _) in enumerate(trib)]
+        self._setup(p, np.concatenate([nd for nd, _ in trib]), np.concatenate([a for _, a in trib]),
+                    np.concatenate(masters), [q for pool in pools for q in pool], search, extend, smoothing,
+                    smooth_normals, penalty_factor)
+
+    @classmethod
+    def self_contact(cls, p: np.ndarray, surfaces, search: float = 1.0, extend: float = 0.5, smoothing: float = 0.0,
+                     smooth_normals: bool = True, penalty_factor: float = 1.0) -> "ContactPair":
+        """Self-contact of each surface (list of outward-oriented facet arrays; surfaces must not share nodes)."""
+        obj = cls.__new__(cls)
+        slave, area, pools, start = [], [], [], 0
+        for f in surfaces:
+            nd, a = _tributary(p, f)
+            excl = _excluded(f, nd)
+            allf = np.arange(f.shape[0])
+            pools += [start + np.setdiff1d(allf, sorted(e)) for e in excl]
+            slave.append(nd)
+            area.append(a)
+            start += f.shape[0]
+        obj._setup(p, np.concatenate(slave), np.concatenate(area), np.concatenate(list(surfaces)), pools, search,
+                   extend, smoothing, smooth_normals, penalty_factor)
+        return obj
+
+    def _setup(self, p, slave, area, master_facets, pools, search, extend, smoothing, smooth_normals, penalty_factor):
+        """Common set-up: slave nodes (ns,), their areas, master facets and per slave its facet ids."""
+        self.dim = p.shape[0]
+        self.penalty_factor = float(penalty_factor)
+        self.smoothing = float(smoothing)
+        self.smooth_normals = bool(smooth_normals)
+        self.slave = np.asarray(slave)
+        self.area = np.asarray(area, float)
+        self.master = master_facets
+        # per slave the facet ids it may pair with, padded by repeating its first (masked by a large distance)
+        width = max(q.size for q in pools)
+        self._pool = np.stack([np.concatenate([q, np.full(width - q.size, q[0])]) for q in pools])
+        self._pad = np.where(np.arange(width)[None, :] >= np.array([q.size for q in pools])[:, None], 1e9, 0.0)
         self.search = search
         # allowed parameter range per master facet: [0, 1] (2D) / [-1, 1]^2 (3D), widened at free edges
         nodes, cnt = np.unique(master_facets, return_counts=True)
@@ -353,25 +396,18 @@ class ContactPair:
         return float(np.sum(0.5 * eps * self.penalty_factor * self.area[ok] * g[ok] ** 2))
 
 
-def contact_pairs_from_mesh(unit_mesh, search: float = 1.0, two_pass: bool = True, extend: float = 0.5,
-                            smoothing: float = 0.0, smooth_normals: bool = True) -> list[ContactPair]:
-    """Contact of every gap of a ``UnitMesh``, as one ``ContactPair`` over all walls.
+def contact_pairs_from_mesh(unit_mesh, search: float = 1.0, extend: float = 0.5, smoothing: float = 0.0,
+                            smooth_normals: bool = True) -> list[ContactPair]:
+    """Self-contact of every contact surface of a ``UnitMesh`` (each gap's U, each pocket's walls) as one pair.
 
-    Each wall is slave once against the other (two-pass), each master
-    extended past its free edges (with a smoothly vanishing penalty) so that
-    the outer corners are caught when two blocks meet corner to corner.  With
-    ``two_pass=False`` only the left wall is slave: the right wall's corner can
-    then pass into the left block (measured with facet normals: the 2D unit
-    stopped at about 108 kPa).
+    Every node of a surface is slave against the facets of the same surface
+    that are not next to it, so both walls of a gap and any two walls of a
+    pocket are kept apart whichever moves; each surface is extended past its
+    free edges (the top corners of a gap's walls; with a smoothly vanishing
+    penalty) so that the outer corners are caught when two blocks meet corner
+    to corner.
     """
-    slaves, masters = [], []
-    for a, b in unit_mesh.contact_pairs:
-        fa, fb = unit_mesh.facets[a], unit_mesh.facets[b]
-        slaves.append(fa)
-        masters.append(fb)
-        if two_pass:
-            slaves.append(fb)
-            masters.append(fa)
-    if not slaves:
+    surfaces = [unit_mesh.facets[name] for name in unit_mesh.contact_surfaces]
+    if not surfaces:
         return []
-    return [ContactPair(unit_mesh.mesh.p, slaves, masters, search, extend, smoothing, smooth_normals)]
+    return [ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals)]

@@ -41,13 +41,14 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import skfem
 
-from ._actuator import backbone_curve, contact_penalty, group_pressures, tip_angle_deg
+from ._actuator import backbone_curve, group_pressures, tip_angle_deg
 from ._assembly import SolidAssembler
 from ._contact import ContactPair, contact_pairs_from_mesh
 from ._finger2d import BONE, FLESH, DeadLoad, StrapSpring, DofSpring, FingerMesh, HingeSpring, RigidRotationUpdate
 from ._mesh import UnitMesh
+from ._overlap import overlap_measures
 from ._solve import DEFAULT_SOLVER, Model, solve_path
-from ._unit import DEFAULT_CONTACT
+from ._unit import DEFAULT_CONTACT, DEFAULT_FORMULATION, contact_penalty, solid_assembler
 
 __all__ = ["CoupledMesh", "couple_meshes", "cell_areas", "nodal_body_force", "CoupledSetup", "coupled_model",
            "CoupledResult", "solve_coupled", "JOINTS"]
@@ -91,7 +92,7 @@ def couple_meshes(act: UnitMesh, offset: Sequence[float], finger: FingerMesh) ->
     facets.update({f"finger_{k}": v + n_act for k, v in finger.facets.items()})
     nodes = dict(act.nodes)
     um = UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=act.geometry, h=act.h,
-                  contact_pairs=list(act.contact_pairs), chamber_group=act.chamber_group)
+                  contact_surfaces=list(act.contact_surfaces), chamber_group=act.chamber_group)
     return CoupledMesh(mesh=mesh, material=material, body=body, act=act, offset=off, n_act=n_act, finger=finger, um=um)
 
 
@@ -139,10 +140,11 @@ class CoupledSetup:
     slide_k: float = 1e-6
     solid: SolidAssembler | None = None
     rigid_update: bool = True
+    formulation: str = DEFAULT_FORMULATION  # of the actuator's silicone and paper; flesh and bone plain Q1
 
     def __post_init__(self):
         if self.solid is None:
-            self.solid = SolidAssembler(self.cm.mesh, self.cm.material, self.mat)
+            self.solid = solid_assembler(self.cm.mesh, self.cm.material, self.mat, self.formulation)
 
 
 def _strap_anchor(cm: CoupledMesh, joint_node: int) -> int:
@@ -223,8 +225,8 @@ def coupled_model(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, 
     extras = [*hinges.values(), *straps.values(), slide]
     if setup.gravity is not None:
         extras.append(DeadLoad(setup.gravity, ramp=gravity_ramp))
-    eps = contact_penalty(setup.mat, cm.act.h, c)
-    pairs = contact_pairs_from_mesh(cm.um, c["search_mm"], c["two_pass"], c["extend"], c["smoothing_mm"])
+    eps = contact_penalty(setup.mat, c)
+    pairs = contact_pairs_from_mesh(cm.um, c["search_mm"], c["extend"], c["smoothing_mm"])
     skin, bottom = cm.um.facets["finger_dorsal"], cm.um.facets["outer_bottom"]
     fac = float(c["finger_penalty"]) / eps  # own penalty (see the module docstring)
     finger_pairs = [ContactPair(p, skin, bottom, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
@@ -264,8 +266,11 @@ class CoupledResult:
     steps: int
     wall_time_s: float
     ndofs: int
+    overlap_depth_mm: float = 0.0  # deepest actuator node inside foreign material over both phases
+    min_pocket_area_mm2: float = np.nan  # smallest pocket of the actuator over both phases
     history: list = field(default_factory=list)
     u: np.ndarray | None = field(default=None, repr=False)
+    state: np.ndarray | None = field(default=None, repr=False)  # u and the enhanced parameters
 
 
 def _gravity_moments(setup: CoupledSetup, x: np.ndarray, lam_g: float) -> np.ndarray:
@@ -286,15 +291,22 @@ def _gravity_moments(setup: CoupledSetup, x: np.ndarray, lam_g: float) -> np.nda
 
 
 def _measure(setup, model, parts, p_ref, lam_g):
+    cm = setup.cm
+    # the finger's segments overlap at their pinned joints by design: only the actuator's nodes and cells count
+    finger = (np.arange(cm.mesh.p.shape[1]) >= cm.n_act, cm.body >= 0)
+
     def measure(u, lam, info):
         x = model.positions(u, p_ref)
+        checks = overlap_measures(cm.um, x, info, ignore=finger)
         th = np.array([parts["hinges"][j].angle(x) for j in JOINTS])
         return {
             "joint_angles_deg": np.degrees(th),
             "spring_moments": np.array([setup.springs[j][0](th[j]) for j in range(3)]),
             "strap_forces": {k: s.force(x) for k, s in parts["straps"].items()},
             "gravity_moments": _gravity_moments(setup, x, lam if lam_g is None else lam_g),
-            "penetration_mm": float(max(0.0, -info.get("gmin", np.inf))) if np.isfinite(info.get("gmin", np.inf)) else 0.0,
+            "penetration_mm": checks["max_penetration_mm"],
+            "overlap_depth_mm": checks["overlap_depth_mm"],
+            "min_pocket_area_mm2": checks["min_pocket_area_mm2"],
         }
     return measure
 
@@ -303,7 +315,7 @@ def solve_coupled(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, 
                   solver: Mapping | None = None, u_gravity: np.ndarray | None = None) -> CoupledResult:
     """Gravity first (ramped alone), then the group pressures ramped from zero with gravity held.
 
-    ``u_gravity``: a converged gravity state to start the pressure phase from
+    ``u_gravity``: a converged gravity state (``CoupledResult.state``) to start the pressure phase from
     (skips the gravity phase; the droop angles are then measured on it).
     Never raises for a failed path: the last converged state is measured.
     """
@@ -320,7 +332,7 @@ def solve_coupled(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, 
         rg = solve_path(mg, p_ref, opts, _measure(setup, mg, parts, p_ref, None))
         iters, steps = rg.iterations, rg.steps
         history += [dict(h, phase="gravity") for h in rg.history]
-        u = rg.u
+        u = rg.state
         status, reason, lam = rg.status, rg.reason, rg.lam
     else:
         u = np.asarray(u_gravity, float)
@@ -332,7 +344,7 @@ def solve_coupled(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, 
         rp = solve_path(model, p_ref, opts, _measure(setup, model, parts, p_ref, 1.0), u0=u)
         iters, steps = iters + rp.iterations, steps + rp.steps
         history += [dict(h, phase="pressure") for h in rp.history]
-        u, status, reason, lam = rp.u, rp.status, rp.reason, rp.lam
+        u, status, reason, lam = rp.state, rp.status, rp.reason, rp.lam
     x = model.positions(u, p_ref)
     th = np.array([parts["hinges"][j].angle(x) for j in JOINTS])
     lam_g = 1.0 if phase == "pressure" else lam
@@ -342,14 +354,17 @@ def solve_coupled(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, 
     sm = np.array([setup.springs[j][0](th[j]) for j in range(3)])
     max_sm = np.max(np.abs(np.array([h["spring_moments"] for h in history] + [sm])), axis=0)
     pen = max([h["penetration_mm"] for h in history], default=0.0)
+    overlap = max([h["overlap_depth_mm"] for h in history], default=0.0)
+    pocket = min([h["min_pocket_area_mm2"] for h in history], default=np.nan)
     curve = backbone_curve(x, p_ref, cm.um.nodes["backbone"])
     return CoupledResult(
         status=status, reason=reason, phase=phase, load_factor=lam, joint_angles_deg=np.degrees(th),
         droop_angles_deg=droop, spring_moments=sm, gravity_moments=_gravity_moments(setup, x, lam_g),
         strap_forces=strap, max_strap_force=max_strap, max_spring_moments=max_sm,
-        slide_force=float(parts["slide"].force(u)[0]), max_penetration_mm=pen, tip_angle_deg=tip_angle_deg(curve),
+        slide_force=float(parts["slide"].force(u)[0]), max_penetration_mm=pen, overlap_depth_mm=overlap,
+        min_pocket_area_mm2=pocket, tip_angle_deg=tip_angle_deg(curve),
         backbone_mm=curve, newton_iterations=iters, steps=steps, wall_time_s=time.perf_counter() - t0,
-        ndofs=model.n, history=history, u=u)
+        ndofs=model.n, history=history, u=u[:model.n].copy(), state=u)
 
 
 __all__ += ["FLESH", "BONE"]

@@ -17,8 +17,16 @@ bilinear quadrilaterals).  3D: the half model z in [0, width/2] with the
 symmetry plane at z = 0 (trilinear hexahedra).  The meshes are tensor-product
 grids through every geometric breakpoint, each interval cut into
 ``ceil(length / h)`` elements (so halving ``h`` nests the meshes), with the
-pocket and gap cells removed.  The paper layer is ``paper_layers`` elements
-thick.
+pocket and gap cells removed.  Through their thickness the paper layer has
+``paper_layers`` elements (default ceil(1 mm / h): one down to h = 1 mm, then
+refined with h, so that halving h halves every element) and each base layer
+``base_layers`` (default ceil(2 bot_layer / h): elements half as tall as h).
+The base layers carry the actuator's bending: on Q1/P0 silicone elements a
+bent layer is measurably too flexible when its elements are as tall as long
+(+2.3 % at 2 elements through the 2 mm base and h = 1 mm) and too stiff when
+they are much flatter (parasitic shear), and elements half as tall as long
+keep the layered cantilever within 2 % of beam theory
+(``tests/test_fem_beam.py``).
 
 The whole actuator (issue 9) is the same chain with ``sum(units_per_group)``
 chambers: ``build_actuator_mesh`` adds per-group cavity facet sets
@@ -34,6 +42,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 import skfem
+
+from ._overlap import boundary_faces
 
 __all__ = ["DEFAULT_GEOMETRY", "UnitMesh", "build_unit_mesh", "build_actuator_mesh", "build_grid_mesh"]
 
@@ -55,9 +65,6 @@ DEFAULT_GEOMETRY: dict[str, float] = {
 # (MeshQuad: counter-clockwise; MeshHex: the order of MeshHex.init_tensor).
 _QUAD = np.array([(0, 0), (1, 0), (1, 1), (0, 1)])
 _HEX = np.array([(0, 0, 0), (0, 1, 0), (1, 0, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1), (1, 0, 1), (1, 1, 1)])
-# Faces as local node lists in cyclic order (orientation fixed afterwards).
-_QUAD_FACES = [(0, 1), (1, 2), (2, 3), (3, 0)]
-_HEX_FACES = [(0, 2, 4, 1), (3, 5, 7, 6), (0, 1, 5, 3), (2, 6, 7, 4), (0, 3, 6, 2), (1, 4, 7, 5)]
 
 
 @dataclass
@@ -73,8 +80,10 @@ class UnitMesh:
     facets : dict of str -> ndarray (nfacets, nodes per facet)
         Boundary facets with nodes ordered so that the outward normal of the
         solid is ``R (x2 - x1)`` (2D) or ``x_xi x x_eta`` (3D).  Keys
-        ``cavity_top``, ``cavity_bottom`` and, per gap g and side s,
-        ``wall_{s}{g}_left`` / ``wall_{s}{g}_right`` (the two facing walls).
+        ``cavity_top``, ``cavity_bottom``; per gap g and side s
+        ``wall_{s}{g}_left`` / ``wall_{s}{g}_right`` (the two facing walls);
+        ``gap_{s}{g}`` (both walls and the floor between them) and per
+        chamber k ``pocket_{s}{k}`` (all walls of the pocket).
     nodes : dict of str -> ndarray of int
         ``clamp`` (x = 0), ``end`` (x = L), ``symmetry`` (z = 0, 3D only),
         ``backbone_end`` / ``backbone_prev`` (paper-layer nodes of the last
@@ -91,9 +100,20 @@ class UnitMesh:
     nodes: dict[str, np.ndarray]
     geometry: dict
     h: float
-    contact_pairs: list[tuple[str, str]] = field(default_factory=list)
+    #: facet sets with self-contact: every gap (its two walls and floor) and every pocket (its walls)
+    contact_surfaces: list[str] = field(default_factory=list)
     #: chamber -> group name (whole actuator only; empty for the unit)
     chamber_group: tuple[str, ...] = ()
+    #: the chain is cut at gap centres (the backbone runs on by half a gap past both end blocks)
+    end_gaps: bool = False
+    _boundary: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def boundary(self) -> np.ndarray:
+        """All boundary faces (nf, nodes per face) in cyclic node order (for the overlap check)."""
+        if self._boundary is None:
+            self._boundary = boundary_faces(self.mesh.t)[0]
+        return self._boundary
 
     @property
     def dim(self) -> int:
@@ -102,7 +122,7 @@ class UnitMesh:
     @property
     def length(self) -> float:
         g = self.geometry
-        return g["n_chambers"] * g["depth"] + (g["n_chambers"] - 1) * g["gap"]
+        return g["n_chambers"] * g["depth"] + (g["n_chambers"] - (0 if self.end_gaps else 1)) * g["gap"]
 
     def write(self, path: str | Path, point_data: Mapping[str, np.ndarray] | None = None) -> Path:
         """Write the mesh (and optional point data, e.g. displacement) with meshio."""
@@ -167,19 +187,20 @@ def build_grid_mesh(coords: list[np.ndarray], keep=None):
     p = p[:, used]
     t = remap[t]
     mesh = (skfem.MeshQuad if dim == 2 else skfem.MeshHex)(p, t.astype(np.int64))
-    # Boundary faces: the faces of exactly one cell.
-    flist = _QUAD_FACES if dim == 2 else _HEX_FACES
-    faces = np.concatenate([t[list(f)].T for f in flist])
-    owner = np.tile(np.arange(t.shape[1]), len(flist))
-    key = np.sort(faces, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = cnt[inv.ravel()] == 1
-    faces, owner = faces[bnd], owner[bnd]
+    faces, owner = boundary_faces(t)  # the faces of exactly one cell
     faces = _orient(p, faces, p[:, t].mean(axis=1)[:, owner])
     return mesh, faces, owner
 
 
-def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, paper_layers: int = 1) -> UnitMesh:
+def layer_counts(g: Mapping, h: float, paper_layers: int | None = None, base_layers: int | None = None) -> tuple[int, int]:
+    """Elements through the paper layer and through each base layer (defaults: see the module docstring)."""
+    npap = int(paper_layers) if paper_layers else max(1, int(np.ceil(1.0 / h - 1e-9)))
+    nbase = int(base_layers) if base_layers else max(1, int(np.ceil(2.0 * g["bot_layer"] / h - 1e-9)))
+    return npap, nbase
+
+
+def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, paper_layers: int | None = None,
+                    base_layers: int | None = None, end_gaps: bool = False) -> UnitMesh:
     """Structured mesh of the three-chamber unit.
 
     Parameters
@@ -192,16 +213,21 @@ def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, p
         ``ceil(length / h)`` equal elements).
     dim : {2, 3}
         2 = plane-strain section, 3 = half model across the width.
-    paper_layers : int
-        Elements through the paper layer's thickness.
+    paper_layers, base_layers : int, optional
+        Elements through the paper layer's and each base layer's thickness
+        (default: ``layer_counts``).
+    end_gaps : bool
+        Cut the chain at gap centres: the backbone runs on by half a gap past
+        both end blocks, as in a unit inside a longer chain.
     """
     g = dict(DEFAULT_GEOMETRY)
     g.update(dict(geom or {}))
-    return _chain_mesh(g, h, dim, paper_layers, None)
+    return _chain_mesh(g, h, dim, layer_counts(g, h, paper_layers, base_layers), None, end_gaps)
 
 
 def build_actuator_mesh(geom: Mapping | None, units_per_group: Mapping[str, int] | Sequence[tuple[str, int]],
-                        h: float = 1.0, dim: int = 2, paper_layers: int = 1) -> UnitMesh:
+                        h: float = 1.0, dim: int = 2, paper_layers: int | None = None,
+                        base_layers: int | None = None) -> UnitMesh:
     """Structured mesh of the whole actuator: chambers in groups, left to right.
 
     Same geometry, element layout and facet orientation as ``build_unit_mesh``
@@ -223,11 +249,17 @@ def build_actuator_mesh(geom: Mapping | None, units_per_group: Mapping[str, int]
     g = dict(DEFAULT_GEOMETRY)
     g.update(dict(geom or {}))
     g["n_chambers"] = len(names)
-    return _chain_mesh(g, h, dim, paper_layers, names)
+    return _chain_mesh(g, h, dim, layer_counts(g, h, paper_layers, base_layers), names)
 
 
-def _chain_mesh(g: dict, h: float, dim: int, paper_layers: int, groups: tuple[str, ...] | None) -> UnitMesh:
-    """Chain of ``g["n_chambers"]`` chambers; ``groups`` (per chamber) adds the actuator's sets."""
+def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tuple[str, ...] | None,
+                end_gaps: bool = False) -> UnitMesh:
+    """Chain of ``g["n_chambers"]`` chambers; ``groups`` (per chamber) adds the actuator's sets.
+
+    ``end_gaps``: the paper and base layers run on by half a gap past both end
+    blocks, so the chain is cut at gap centres as a unit inside a longer chain
+    is (length n (depth + gap)); its end faces are then the backbone alone.
+    """
     n = int(g["n_chambers"])
     d, gap, H, bl = g["depth"], g["gap"], g["height"], g["bot_layer"]
     tf, tu, ts, tp = g["ac_th_for"], g["ac_th_up"], g["ac_th_side"], g["paper_width"]
@@ -236,16 +268,20 @@ def _chain_mesh(g: dict, h: float, dim: int, paper_layers: int, groups: tuple[st
     yb = y0 + bl  # top of the base layer = block base = pocket floor
     yp = yb + H - tu  # pocket roof
     yt = yb + H  # block top
-    xs = [0.0]
+    xs = [-gap / 2, 0.0] if end_gaps else [0.0]
     for k in range(n):
         x0 = k * (d + gap)
         xs += [x0 + tf, x0 + d - tf, x0 + d]
         if k < n - 1:
             xs.append(x0 + d + gap)
+    if end_gaps:
+        xs.append(L + gap / 2)
     xb = np.array(xs)
     ybr = np.array([-yt, -yp, -yb, -y0, y0, yb, yp, yt])
     xc = _divisions(xb, h)
-    yc = np.concatenate([_divisions(ybr[:4], h), np.linspace(-y0, y0, paper_layers + 1)[1:], _divisions(ybr[4:], h)[1:]])
+    npap, nbase = layers
+    yc = np.concatenate([_divisions(ybr[:3], h), np.linspace(-yb, -y0, nbase + 1)[1:], np.linspace(-y0, y0, npap + 1)[1:],
+                         np.linspace(y0, yb, nbase + 1)[1:], _divisions(ybr[5:], h)[1:]])
     coords = [xc, yc]
     if dim == 3:
         zb = np.array([0.0, g["width"] / 2 - ts, g["width"] / 2])
@@ -261,6 +297,7 @@ def _chain_mesh(g: dict, h: float, dim: int, paper_layers: int, groups: tuple[st
             hole |= (x > a) & (x < b) & (ay > yb) & (ay < yp) & in_z
         for a, b in gaps:
             hole |= (x > a) & (x < b) & (ay > yb)
+        hole |= ((x < 0) | (x > L)) & (ay > yb)  # the half gaps past the end blocks (end_gaps)
         return ~hole
 
     mesh, faces, owner = build_grid_mesh(coords, solid)
@@ -277,20 +314,49 @@ def _chain_mesh(g: dict, h: float, dim: int, paper_layers: int, groups: tuple[st
         for a, b in pockets:
             sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yb - tol) & (ys < yp + tol) & in_z
         facets[f"cavity_{side}"] = faces[sel]
-    pairs = []
+    surfaces = []
     for side, sgn in (("top", 1.0), ("bottom", -1.0)):
         ys = sgn * mid[1]
         for k, (a, b) in enumerate(gaps):
             for name, x in (("left", a), ("right", b)):
                 sel = (np.abs(mid[0] - x) < tol) & (ys > yb)
                 facets[f"wall_{side}{k}_{name}"] = faces[sel]
-            pairs.append((f"wall_{side}{k}_left", f"wall_{side}{k}_right"))
+            floor = (np.abs(ys - yb) < tol) & (mid[0] > a) & (mid[0] < b)
+            facets[f"gap_{side}{k}"] = np.concatenate([facets[f"wall_{side}{k}_left"], faces[floor],
+                                                       facets[f"wall_{side}{k}_right"]])
+            surfaces.append(f"gap_{side}{k}")
+        if end_gaps:  # the end blocks' outer walls and the backbone's top past them: half a gap each
+            for name, x, lo, hi in (("first", 0.0, -gap / 2, 0.0), ("last", L, L, L + gap / 2)):
+                wall = (np.abs(mid[0] - x) < tol) & (ys > yb)
+                top = (np.abs(ys - yb) < tol) & (mid[0] > lo) & (mid[0] < hi)
+                facets[f"gap_{side}_{name}"] = faces[wall | top]
+                surfaces.append(f"gap_{side}_{name}")
+    # each pocket's walls (the solid's outward normals point into the pocket); 3D: the half pocket
+    # is open at the symmetry plane z = 0
+    for side, sgn in (("top", 1.0), ("bottom", -1.0)):
+        ys = sgn * mid[1]
+        in_z = np.ones(faces.shape[0], bool) if dim == 2 else mid[2] < g["width"] / 2 - ts - tol
+        for k, (a, b) in enumerate(pockets):
+            in_x = (mid[0] > a + tol) & (mid[0] < b - tol)
+            in_y = (ys > yb + tol) & (ys < yp - tol)
+            walls = {
+                "left": (np.abs(mid[0] - a) < tol) & in_y & in_z,
+                "right": (np.abs(mid[0] - b) < tol) & in_y & in_z,
+                "floor": (np.abs(ys - yb) < tol) & in_x & in_z,
+                "roof": (np.abs(ys - yp) < tol) & in_x & in_z,
+            }
+            if dim == 3:
+                walls["side"] = (np.abs(mid[2] - (g["width"] / 2 - ts)) < tol) & in_x & in_y
+            name = f"pocket_{side}{k}"
+            facets[name] = np.concatenate([faces[sel] for sel in walls.values()])
+            surfaces.append(name)
     ux = np.unique(np.round(p[0], 9))
     paper = np.abs(p[1]) <= y0 + tol
+    x_lo, x_hi = float(xb[0]), float(xb[-1])
     nodes = {
-        "clamp": np.flatnonzero(np.abs(p[0]) < tol),
-        "end": np.flatnonzero(np.abs(p[0] - L) < tol),
-        "backbone_end": np.flatnonzero(paper & (np.abs(p[0] - L) < tol)),
+        "clamp": np.flatnonzero(np.abs(p[0] - x_lo) < tol),
+        "end": np.flatnonzero(np.abs(p[0] - x_hi) < tol),
+        "backbone_end": np.flatnonzero(paper & (np.abs(p[0] - x_hi) < tol)),
         "backbone_prev": np.flatnonzero(paper & (np.abs(p[0] - ux[-2]) < tol)),
     }
     if dim == 3:
@@ -307,5 +373,5 @@ def _chain_mesh(g: dict, h: float, dim: int, paper_layers: int, groups: tuple[st
                 facets[f"cavity_{side}_{name}"] = faces[sel]
             facets[f"outer_{side}"] = faces[np.abs(ys - yt) < tol]
         nodes["backbone"] = np.flatnonzero(paper)
-    return UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=g, h=float(h), contact_pairs=pairs,
-                    chamber_group=tuple(groups or ()))
+    return UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=g, h=float(h), contact_surfaces=surfaces,
+                    chamber_group=tuple(groups or ()), end_gaps=bool(end_gaps), _boundary=faces)

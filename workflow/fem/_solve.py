@@ -92,7 +92,8 @@ class Model:
         self.contacts = list(contacts)
         self.penalty = float(penalty)
         n = solid.ndofs
-        self.n = n
+        self.n = n  # nodal dofs; the state adds solid.n_internal enhanced parameters
+        self.nstate = getattr(solid, "nstate", n)
         prescribed = dict(prescribed or {})
         self.uD = np.zeros(n)
         for dof, val in prescribed.items():
@@ -138,20 +139,30 @@ class Model:
         self.timing = {"assembly_s": 0.0, "solve_s": 0.0}
 
     def increment(self, u: np.ndarray, du: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
-        """u advanced by the correction du (through the ``updaters``; u + du without them)."""
+        """State u advanced by the correction du (nodal part through the ``updaters``; u + du without them)."""
+        n = self.n
+        dn = du[:n]
         for upd in self.updaters:
-            du = upd.increment(p_ref, u, du)
-        return u + du
+            dn = upd.increment(p_ref, u[:n], dn)
+        return u + (np.concatenate([dn, du[n:]]) if self.updaters else du)
 
     def positions(self, u: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
-        return p_ref + u.reshape(-1, self.solid.dim).T
+        """Current nodal coordinates (dim, nnodes) of the state (or nodal displacements) u."""
+        return p_ref + u[:self.n].reshape(-1, self.solid.dim).T
 
     def evaluate(self, u: np.ndarray, lam: float, p_ref: np.ndarray, tangent: bool = True):
-        """Full residual r = f_int + f_contact - f_ext, tangent (csr) and info."""
+        """Nodal residual r = f_int + f_contact - f_ext, tangent (csr, enhanced parameters condensed) and info.
+
+        ``info["r_internal"]`` is the residual of the enhanced parameters and,
+        with a tangent, ``info["r_condensed"]`` the nodal residual of the
+        condensed system (see ``SolidAssembler``).
+        """
         t0 = time.perf_counter()
         d = self.solid.dim
-        f_int, kvals, jmin = self.solid.assemble(u, tangent)
-        info = {"jmin": jmin, "gmin": np.inf}
+        f_full, kvals, jmin = self.solid.assemble(u, tangent)
+        f_int = f_full[:self.n]
+        u = u[:self.n]
+        info = {"jmin": jmin, "gmin": np.inf, "r_internal": f_full[self.n:]}
         if not jmin > 0:
             self.timing["assembly_s"] += time.perf_counter() - t0
             return None, None, info
@@ -190,13 +201,20 @@ class Model:
                 K = K + sp.csr_matrix((np.concatenate(cv), (np.concatenate(cr), np.concatenate(cc))), shape=(self.n, self.n))
         info["f_ext_norm"] = float(np.sqrt(f_ext @ f_ext + f_ref2))
         info["r"] = r
+        if tangent and self.nstate > self.n:
+            info["r_condensed"] = r + self.solid.condensed_correction()
         self.timing["assembly_s"] += time.perf_counter() - t0
         return r, K, info
 
 
 @dataclass
 class PathResult:
-    """Outcome of ``solve_path``: final state, status and per-step history."""
+    """Outcome of ``solve_path``: final state, status and per-step history.
+
+    ``u`` is the nodal displacement (mm, node-interleaved); ``state`` the full
+    solver state (``u`` followed by the enhanced parameters), the start of a
+    follow-on path (``solve_path(..., u0=result.state)``).
+    """
 
     u: np.ndarray
     lam: float
@@ -207,29 +225,32 @@ class PathResult:
     cutbacks: int
     history: list = field(default_factory=list)
     timing: dict = field(default_factory=dict)
+    state: np.ndarray | None = field(default=None, repr=False)
 
 
-def _line_search(model: Model, u: np.ndarray, du: np.ndarray, rr: np.ndarray, lam: float, p_ref: np.ndarray,
+def _slope(model: Model, u: np.ndarray, du: np.ndarray, lam: float, p_ref: np.ndarray) -> float:
+    """du . r(u + du): the residual of the whole state (nodal and enhanced) along the correction."""
+    r, _, info = model.evaluate(model.increment(u, du, p_ref), lam, p_ref, tangent=False)
+    if r is None:
+        return np.inf
+    return float(du[:model.n] @ r + du[model.n:] @ info["r_internal"])
+
+
+def _line_search(model: Model, u: np.ndarray, du: np.ndarray, s0: float, lam: float, p_ref: np.ndarray,
                  ratio: float = 0.5, trials: int = 3) -> np.ndarray:
     """Scale the Newton correction so that the residual's component along it drops.
 
-    s(a) = du . r(u + a du); s(0) < 0 for a descent direction.  The full step is
-    kept when |s(1)| <= ratio |s(0)| (Newton near the solution); otherwise a few
-    regula-falsi steps on s (the Matthies-Strang / Crisfield line search).  This
-    tames the first iterations of a load step, where the linearised rotation
-    of nearly incompressible and of stiff paper elements causes large spurious
-    volumetric stresses.
+    s(a) = du . r(u + a du); s0 = s(0) < 0 for a descent direction.  The full
+    step is kept when |s(1)| <= ratio |s(0)| (Newton near the solution);
+    otherwise a few regula-falsi steps on s (the Matthies-Strang / Crisfield
+    line search).  This tames the first iterations of a load step, where the
+    linearised rotation of nearly incompressible and of stiff paper elements
+    causes large spurious volumetric stresses.
     """
-    T = model.T
-    s0 = float(rr @ (T.T @ du))
     if not s0 < 0:
         return du
     a_lo, s_lo, a_hi = 0.0, s0, 1.0
-    r1, _, _ = model.evaluate(model.increment(u, du, p_ref), lam, p_ref, tangent=False)
-    if r1 is None:
-        s_hi = np.inf
-    else:
-        s_hi = float((T.T @ r1) @ (T.T @ du))
+    s_hi = _slope(model, u, du, lam, p_ref)
     if np.isfinite(s_hi) and abs(s_hi) <= ratio * abs(s0):
         return du
     a = 1.0
@@ -241,8 +262,7 @@ def _line_search(model: Model, u: np.ndarray, du: np.ndarray, rr: np.ndarray, la
                 return du * a_hi
             a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
             a = min(max(a, a_lo + 0.1 * (a_hi - a_lo)), a_lo + 0.9 * (a_hi - a_lo))
-        ra, _, _ = model.evaluate(model.increment(u, a * du, p_ref), lam, p_ref, tangent=False)
-        sa = np.inf if ra is None else float((T.T @ ra) @ (T.T @ du))
+        sa = _slope(model, u, a * du, lam, p_ref) / a
         if np.isfinite(sa) and abs(sa) <= ratio * abs(s0):
             return a * du
         if np.isfinite(sa) and sa < 0:
@@ -253,11 +273,12 @@ def _line_search(model: Model, u: np.ndarray, du: np.ndarray, rr: np.ndarray, la
 
 
 def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: dict):
-    """Newton iterations at fixed lam; returns (ok, u, iterations, reason, info)."""
+    """Newton iterations at fixed lam on the state u0; returns (ok, u, iterations, reason, info)."""
     T = model.T
+    n = model.n
     # u = T v + lam uD: the unknowns v are read from their carrier dofs, so
     # prescribed values and tie offsets follow the new load factor
-    u = model.T @ u0[model.rep] + lam * model.uD
+    u = np.concatenate([model.T @ u0[model.rep] + lam * model.uD, u0[n:]])
     r0 = None
     info = {}
     for it in range(1, opts["max_iter"] + 1):
@@ -265,7 +286,8 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
         if r is None:
             return False, u, it, "inverted element", info
         rr = T.T @ r
-        norm = float(np.linalg.norm(rr))
+        ri = info["r_internal"]
+        norm = float(np.sqrt(rr @ rr + ri @ ri))
         if not np.isfinite(norm):
             return False, u, it, "non-finite residual", info
         ref = info["f_ext_norm"] + float(np.linalg.norm(r[model.constrained]))
@@ -278,7 +300,7 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
         Kr = _linsolve.reduce_matrix(K, T)
         t0 = time.perf_counter()
         try:
-            dv = linear_solve(Kr, -rr)
+            dv = linear_solve(Kr, -(T.T @ info.get("r_condensed", r)))
         except Exception as exc:  # singular or solver failure: cut back
             return False, u, it, f"linear solve failed: {exc}", info
         finally:
@@ -286,8 +308,10 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
         if not np.all(np.isfinite(dv)):
             return False, u, it, "singular tangent", info
         du = T @ dv
+        if model.nstate > n:
+            du = np.concatenate([du, model.solid.recover(du)])
         if opts["line_search"]:
-            du = _line_search(model, u, du, rr, lam, p_ref)
+            du = _line_search(model, u, du, float(du[:n] @ r + du[n:] @ ri), lam, p_ref)
         u = model.increment(u, du, p_ref)
     return False, u, opts["max_iter"], "no convergence", info
 
@@ -296,15 +320,22 @@ def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, mea
                u0: np.ndarray | None = None, stops=()) -> PathResult:
     """Ramp the load factor from 0 to 1 with adaptive steps.
 
-    ``measure(u, lam, info)`` is called after every accepted step; its dict is
-    stored in ``history`` together with lam, the Newton iterations, the
-    smallest contact gap and the elapsed wall time.  The steps land exactly on
-    every load factor in ``stops`` (0 < stop <= 1).
+    ``measure(u, lam, info)`` is called after every accepted step (u: the
+    state; ``model.positions(u, p_ref)`` gives the nodes); its dict is stored
+    in ``history`` together with lam, the Newton iterations, the smallest
+    contact gap and the elapsed wall time.  The steps land exactly on every
+    load factor in ``stops`` (0 < stop <= 1).  ``u0``: nodal displacements or
+    a full state (``PathResult.state``) to start from.
     """
     opts = dict(DEFAULT_SOLVER)
     opts.update(options or {})
     t_start = time.perf_counter()
-    u = np.zeros(model.n) if u0 is None else u0.copy()
+    if u0 is None:
+        u = np.zeros(model.nstate)
+    elif np.size(u0) == model.nstate:
+        u = np.array(u0, float)
+    else:
+        u = np.concatenate([np.asarray(u0, float), np.zeros(model.nstate - model.n)])
     u_prev = u.copy()
     lam, dlam, dlam_prev = 0.0, float(opts["initial_step"]), 0.0
     history, iters, steps, cuts = [], 0, 0, 0
@@ -352,5 +383,5 @@ def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, mea
         reason = ""
     timing = dict(model.timing)
     timing["wall_s"] = time.perf_counter() - t_start
-    return PathResult(u=u, lam=lam, status=status, reason=reason, iterations=iters, steps=steps, cutbacks=cuts,
-                      history=history, timing=timing)
+    return PathResult(u=u[:model.n].copy(), lam=lam, status=status, reason=reason, iterations=iters, steps=steps,
+                      cutbacks=cuts, history=history, timing=timing, state=u)

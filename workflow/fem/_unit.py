@@ -61,9 +61,10 @@ from typing import Mapping
 
 import numpy as np
 
-from ._assembly import SolidAssembler
+from ._assembly import PAPER, SILICONE, SolidAssembler
 from ._contact import contact_pairs_from_mesh
 from ._mesh import UnitMesh, build_unit_mesh
+from ._overlap import overlap_measures
 from ._solve import DEFAULT_SOLVER, Model, solve_path
 
 __all__ = ["DEFAULT_MATERIAL", "DEFAULT_CONTACT", "CASES", "END_HOLDS", "material_constants", "UnitResult", "solve_unit",
@@ -80,8 +81,17 @@ DEFAULT_MATERIAL = {
     "paper_nu": 0.2,
 }
 
-#: Penalty contact: eps = penalty_factor * mu0 / h (MPa/mm); search distance, mm.
-DEFAULT_CONTACT = {"penalty_factor": 100.0, "search_mm": 1.0, "two_pass": True, "extend": 0.5, "smoothing_mm": 0.01}
+#: Penalty self-contact: eps = penalty_factor * mu0 / penalty_length_mm (MPa/mm), the same on every
+#: mesh (a contact pressure p_c gives a penetration p_c / eps: mu0 gives 0.01 mm); search distance, mm.
+DEFAULT_CONTACT = {"penalty_factor": 100.0, "penalty_length_mm": 1.0, "search_mm": 1.0, "extend": 0.5,
+                   "smoothing_mm": 0.01}
+
+
+def contact_penalty(mat: Mapping, contact: Mapping) -> float:
+    """Silicone self-contact penalty eps = penalty_factor mu0 / penalty_length_mm (MPa/mm), mesh-independent."""
+    c = dict(DEFAULT_CONTACT)
+    c.update(dict(contact))
+    return float(c["penalty_factor"]) * mat["mu0"] / float(c["penalty_length_mm"])
 
 
 def material_constants(material: Mapping | None = None) -> dict:
@@ -148,9 +158,30 @@ class UnitResult:
 
 CASES = ("free", "blocked", "rotation")
 END_HOLDS = ("face", "backbone")
+#: The blocked moment's end hold used by every caller (see the module docstring).
+DEFAULT_END_HOLD = "face"
+#: Element formulations -> (mean dilatation in the silicone, material ids with enhanced strains):
+#: ``enhanced_paper``: mean-dilatation silicone, enhanced (incompatible-mode) paper layer;
+#: ``enhanced``: both enhanced; ``mixed``: mean dilatation only (the paper layer shear-locks in
+#: bending); ``displacement``: plain Q1 (also locks volumetrically).  The last two for studies.
+FORMULATIONS = {
+    "enhanced_paper": (True, (PAPER,)),
+    "enhanced": (True, (SILICONE, PAPER)),
+    "mixed": (True, ()),
+    "displacement": (False, ()),
+}
+DEFAULT_FORMULATION = "enhanced_paper"
 
 
-def held_end_nodes(um: UnitMesh, end_hold: str = "face") -> np.ndarray:
+def solid_assembler(mesh, material: np.ndarray, mat: Mapping, formulation: str = DEFAULT_FORMULATION) -> SolidAssembler:
+    """The ``SolidAssembler`` of an actuator body (silicone 0, paper 1, others plain) in ``formulation``."""
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"formulation must be one of {tuple(FORMULATIONS)}, not {formulation!r}")
+    mixed, enhanced = FORMULATIONS[formulation]
+    return SolidAssembler(mesh, material, dict(mat), mixed=mixed, enhanced=enhanced)
+
+
+def held_end_nodes(um: UnitMesh, end_hold: str = DEFAULT_END_HOLD) -> np.ndarray:
     """Right-end nodes held plane by cases ``blocked``/``rotation``.
 
     ``face``: the whole end face (the blocks' end walls too).  ``backbone``:
@@ -186,8 +217,8 @@ def clamp_rotation(um: UnitMesh, angle_deg: float) -> dict:
 
 
 def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", contact: bool = True,
-               material: Mapping | None = None, contact_options: Mapping | None = None, mixed: bool = True,
-               end_angle_deg: float = 0.0, end_hold: str = "face") -> Model:
+               material: Mapping | None = None, contact_options: Mapping | None = None, formulation: str = DEFAULT_FORMULATION,
+               end_angle_deg: float = 0.0, end_hold: str = DEFAULT_END_HOLD) -> Model:
     """The ``Model`` of the unit (pressures in MPa at load factor 1).
 
     ``end_angle_deg`` (deg, total over the unit, + = P_T sense) is used by
@@ -196,7 +227,7 @@ def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = 
     if case not in CASES:
         raise ValueError(f"case must be one of {CASES}, not {case!r}")
     mat = material_constants(material)
-    solid = SolidAssembler(um.mesh, um.material, mat, mixed=mixed)
+    solid = solid_assembler(um.mesh, um.material, mat, formulation)
     dim = um.dim
     # counter-clockwise clamp = the end face turned clockwise (P_T sense) relative to it
     prescribed = clamp_rotation(um, end_angle_deg) if case == "rotation" else {}
@@ -212,9 +243,9 @@ def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = 
     }
     copts = dict(DEFAULT_CONTACT)
     copts.update(dict(contact_options or {}))
-    pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["two_pass"], copts["extend"], copts["smoothing_mm"]) if contact else []
-    eps = copts["penalty_factor"] * mat["mu0"] / um.h
-    return Model(solid, pressures=pressures, contacts=pairs, penalty=eps, fixed=fixed, prescribed=prescribed, ties=ties)
+    pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["extend"], copts["smoothing_mm"]) if contact else []
+    return Model(solid, pressures=pressures, contacts=pairs, penalty=contact_penalty(mat, copts), fixed=fixed,
+                 prescribed=prescribed, ties=ties)
 
 
 def clamp_inclination_deg(end_angle_deg: float, lam: float) -> float:
@@ -228,7 +259,7 @@ def clamp_inclination_deg(end_angle_deg: float, lam: float) -> float:
 
 
 def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_bottom_kpa: float,
-                     end_angle_deg: float = 0.0, end_hold: str = "face"):
+                     end_angle_deg: float = 0.0, end_hold: str = DEFAULT_END_HOLD):
     p_ref = um.mesh.p
     dim = um.dim
     n = int(um.geometry["n_chambers"])
@@ -249,7 +280,6 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
             c = xe.mean(axis=1)
             m_mm = np.sum((xe[0] - c[0]) * r[:, 1] - (xe[1] - c[1]) * r[:, 0])
             moment = float(m_mm * width_factor * 1e-3)  # N mm (per mm) -> N m, full width
-        gmin = info.get("gmin", np.inf)
         return {
             "p_top_kpa": lam * p_top_kpa,
             "p_bottom_kpa": lam * p_bottom_kpa,
@@ -257,7 +287,7 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
             "bending_angle_deg": float(total / n),
             "bending_moment_nm": moment,
             "end_angle_deg": end_angle,
-            "max_penetration_mm": float(max(0.0, -gmin)) if np.isfinite(gmin) else 0.0,
+            **overlap_measures(um, x, info),
         }
 
     return measure
@@ -265,15 +295,15 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
 
 def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", contact: bool = True, *,
                material: Mapping | None = None, contact_options: Mapping | None = None,
-               solver: Mapping | None = None, mixed: bool = True, keep_displacement: bool = False,
-               stops=(), end_angle_deg: float = 0.0, end_hold: str = "face") -> UnitResult:
+               solver: Mapping | None = None, formulation: str = DEFAULT_FORMULATION, keep_displacement: bool = False,
+               stops=(), end_angle_deg: float = 0.0, end_hold: str = DEFAULT_END_HOLD) -> UnitResult:
     """Solve the unit model from zero to (p_top_kpa, p_bottom_kpa) and measure it.
 
     Parameters
     ----------
     mesh_or_params : UnitMesh or mapping
         A mesh from ``build_unit_mesh`` or a mapping with ``dim``, ``h`` (mm),
-        optional ``geometry`` and ``paper_layers``.
+        optional ``geometry``, ``paper_layers`` and ``base_layers``.
     p_top_kpa, p_bottom_kpa : float
         Top and bottom chamber pressures at the end of the ray, kPa.
     case : {"free", "blocked", "rotation"}
@@ -284,8 +314,8 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
         Penalty self-contact across the gaps.
     material, contact_options, solver : mapping, optional
         Overrides of ``DEFAULT_MATERIAL``, ``DEFAULT_CONTACT``, ``DEFAULT_SOLVER``.
-    mixed : bool
-        False = plain Q1 displacement elements (lock; for tests only).
+    formulation : str
+        Element technology (``FORMULATIONS``); ``mixed`` and ``displacement`` lock, for studies.
     keep_displacement : bool
         Keep the final nodal displacement (mm, node-interleaved) in the result.
     stops : sequence of float
@@ -308,8 +338,10 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
         um = mesh_or_params
     else:
         prm = dict(mesh_or_params)
-        um = build_unit_mesh(prm.get("geometry"), h=prm["h"], dim=prm["dim"], paper_layers=prm.get("paper_layers", 1))
-    model = unit_model(um, p_top_kpa, p_bottom_kpa, case, contact, material, contact_options, mixed, end_angle_deg, end_hold)
+        um = build_unit_mesh(prm.get("geometry"), h=prm["h"], dim=prm["dim"], paper_layers=prm.get("paper_layers"),
+                             base_layers=prm.get("base_layers"))
+    model = unit_model(um, p_top_kpa, p_bottom_kpa, case, contact, material, contact_options, formulation, end_angle_deg,
+                       end_hold)
     measure = _measure_factory(um, model, case, p_top_kpa, p_bottom_kpa, end_angle_deg, end_hold)
     opts = dict(DEFAULT_SOLVER)
     opts.update(dict(solver or {}))
