@@ -10,8 +10,9 @@ from workflow.provenance import code_files
 
 validate(config, "../config/schema.yaml")
 # Checks JSON Schema cannot express (cross references between sections),
-# still before any job starts.
-settings.check_config(config)
+# still before any job starts; what is computed but questionable is said here.
+for _warning in settings.check_config(config):
+    logger.warning(f"config: {_warning}")
 
 PATIENTS = sorted(config["patients"])
 
