@@ -27,7 +27,7 @@ import xarray as xr
 
 from workflow import fem
 from workflow.cascade import CHAMBERS, GROUPS
-from workflow.fea_check import MAPPING_FLAGS, load_surrogate_angles, pressures_2d
+from workflow.fea_check import MAPPING_FLAGS, applied_limit, load_surrogate_angles, pressures_2d
 from workflow.fem._actuator import solve_standalone
 from workflow.fem._mesh import build_actuator_mesh
 
@@ -140,7 +140,7 @@ def write_standalone(patient_name: str, *, plan_nc: str, out_nc: str, out_png: s
     use_map = bool(fea_cfg.get("map_pressures", True)) and cascade_cfg.get("surrogate", "3d") == "3d"
     a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
     p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
-    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
+    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     ds = standalone_dataset(plan, exercises=ex, models=models, actuator_cfg=actuator_cfg,

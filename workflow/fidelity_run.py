@@ -244,7 +244,7 @@ def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequen
     unit's at the applied pressures) with their time as the cheap stand-ins.
     """
     from workflow.cascade import patient_cascade, patient_finger, solve_equilibrium
-    from workflow.fea_check import check_exercise, gravity_state, load_surrogate_angles, pressures_2d
+    from workflow.fea_check import applied_limit, check_exercise, gravity_state, load_surrogate_angles, pressures_2d
     from workflow.fea_model import build_patient_fea
     from workflow.finger import JOINTS
     from workflow.unit_model import load_unit_model
@@ -257,7 +257,7 @@ def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequen
     a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d)
     ex = [str(e) for e in exercises]
     p3 = plan["pressure_kpa"].sel(exercise=ex).values
-    p2, _ = pressures_2d(p3, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
+    p2, _ = pressures_2d(p3, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     hs = sorted((float(h) for h in h_mm), reverse=True)
@@ -409,7 +409,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             cells[name, f"cv_{t}"] = (float(c["rmse"].mean("fold")), nrmse)
 
     if plan_inputs:
-        from workflow.cascade import patient_cascade, patient_finger, plan_options, plan_patient
+        from workflow.cascade import patient_cascade, patient_finger, plan_limit, plan_options, plan_patient
         from workflow.unit_model import UnitModel
 
         pi = plan_inputs
@@ -417,7 +417,6 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
         finger, _ = patient_finger(pi["patient"], loads, xr.load_dataset(pi["moments"]), xr.load_dataset(pi["ccd"]),
                                    cascade_cfg=pi["cascade"], anthropometry=pi["anthropometry"])
         c = pi["cascade"]
-        opts = plan_options(c, loads["active_limit_nm"].values)
         targets = {str(e): loads["target_angle_deg"].sel(exercise=e).values for e in loads["exercise"].values}
         plan_fea = c.get("surrogate", "3d")
         cand = [r for r in rows if r[1] == f"surrogate_{plan_fea}"]
@@ -427,6 +426,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
         for name, _, _, _, s_t, _, s in cand:
             unit = UnitModel.from_surrogate(s, **pi["unit_model"])
             ro = patient_cascade(finger, unit, c)
+            opts = plan_options(c, loads["active_limit_nm"].values, plan_limit(c, unit))  # no plan beyond the samples
             t0 = time.perf_counter()
             plans[name] = {p.exercise: p.pressures_kpa for p in plan_patient(ro, targets, **opts)}
             t_plan = (time.perf_counter() - t0) / len(targets)  # one evaluation = one exercise's plan

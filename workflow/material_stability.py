@@ -1,7 +1,7 @@
 """Drucker stability of the silicone's Mooney-Rivlin constants (Table 5), checked before any FE job.
 
 The law is the incompressible three-term Mooney-Rivlin form of the FE model
-(paper section 2.3, Table 5)::
+(paper section 3.1, Table 5)::
 
     psi = c10 (I1 - 3) + c01 (I2 - 3) + c20 (I1 - 3)^2
 

@@ -1,6 +1,7 @@
 import xarray as xr
 
 from workflow.cascade import write_cascade_plan
+from workflow.pressure_limit import material_limit
 from workflow.scripts._common import setup_logging
 from workflow.stability import SampledRegion
 from workflow.surrogates import load_surrogate
@@ -19,4 +20,4 @@ write_cascade_plan(snakemake.wildcards.patient, p.patient, unit, ccd_nc=i.ccd, m
                    joint_loads_nc=i.joint_loads, out_nc=snakemake.output.plan,  # noqa: F821
                    out_png=snakemake.output.plot, cascade_cfg=p.cascade,  # noqa: F821
                    anthropometry=p.anthropometry, config_slice=p.config_slice, rule=snakemake.rule,  # noqa: F821
-                   sampled_region=region, notes=notes)
+                   sampled_region=region, notes=notes, material_limit=material_limit(p.pressure_limit))
