@@ -808,12 +808,12 @@ def write_cascade_plan(
 
     import xarray as xr
 
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
     log = logging.getLogger(__name__)
     c = cascade_cfg
-    loads = xr.load_dataset(joint_loads_nc)
-    fing, spring_note = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+    loads = open_result(joint_loads_nc)
+    fing, spring_note = patient_finger(patient, loads, open_result(moments_nc), open_result(ccd_nc),
                                        cascade_cfg=c, anthropometry=anthropometry)
     finger_name = str(patient.get("finger", "F3"))
     model = patient_cascade(fing, unit, c)

@@ -492,11 +492,11 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
     """
     from workflow.cascade import patient_cascade, patient_finger, plan_limit, plan_options
     from workflow.fea_model import build_patient_fea
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
-    plan = xr.load_dataset(plan_nc)
-    loads = xr.load_dataset(joint_loads_nc)
-    finger, spring_note = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+    plan = open_result(plan_nc)
+    loads = open_result(joint_loads_nc)
+    finger, spring_note = patient_finger(patient, loads, open_result(moments_nc), open_result(ccd_nc),
                                          cascade_cfg=cascade_cfg, anthropometry=anthropometry)
     upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
     fea = build_patient_fea(finger, upg, actuator_cfg=actuator_cfg, cascade_cfg=cascade_cfg,

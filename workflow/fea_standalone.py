@@ -131,9 +131,9 @@ def write_standalone(patient_name: str, *, plan_nc: str, out_nc: str, out_png: s
                      actuator_cfg: Mapping, cascade_cfg: Mapping, config_slice: Any, surrogate_2d: str | None = None,
                      surrogate_3d: str | None = None, rule: str = "standalone_actuator") -> xr.Dataset:
     """The rule's entry point (see the module docstring)."""
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
-    plan = xr.load_dataset(plan_nc)
+    plan = open_result(plan_nc)
     sa = dict(fea_cfg.get("standalone", {}))
     ex = list(sa.get("exercises") or fea_cfg.get("exercises") or [str(e) for e in plan["exercise"].values])
     models = list(sa.get("models", MODELS))

@@ -25,7 +25,7 @@ import xarray as xr
 
 from workflow import fidelity as FD
 from workflow.fem_study import P_STUDY
-from workflow.provenance import write_dataset
+from workflow.provenance import open_result, write_dataset
 
 __all__ = ["fem_table", "write_fem_choice", "write_msk_study",
            "write_check_study", "write_speed_accuracy"]
@@ -94,7 +94,7 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
     largest over the quantities, each divided by its bound (so <= 1 means
     within); it must have reached every point.  The reference itself has error 0.
     """
-    table = fem_table([xr.load_dataset(f) for f in case_files])
+    table = fem_table([open_result(f) for f in case_files])
     tol = tolerance if isinstance(tolerance, Mapping) else {"angle": float(tolerance), "moment": float(tolerance)}
     bound = xr.DataArray([float(tol[str(q).split("_")[0]]) for q in table["quantity"].values], dims="quantity",
                          coords={"quantity": table["quantity"].values})
@@ -168,8 +168,8 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
     from workflow.pipeline import design_from_ccd
 
     design = design_from_ccd(ccd_nc)
-    responses = responses_from_moments(xr.load_dataset(moments_nc), exercises)
-    rsm_ds = xr.load_dataset(rsm_nc)
+    responses = responses_from_moments(open_result(moments_nc), exercises)
+    rsm_ds = open_result(rsm_nc)
     quants = [q for q in _msk_quantities(exercises, finger) if q[1] in responses]
     forms = [str(f) for f in rsm_ds["form"].values]
     selected = {q[1]: forms[int(np.argmax(rsm_ds["selected"].sel(response=q[1]).values))] for q in quants}
@@ -249,9 +249,9 @@ def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequen
     from workflow.finger import JOINTS
     from workflow.unit_model import load_unit_model
 
-    plan = xr.load_dataset(plan_nc)
-    loads = xr.load_dataset(joint_loads_nc)
-    finger, _ = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+    plan = open_result(plan_nc)
+    loads = open_result(joint_loads_nc)
+    finger, _ = patient_finger(patient, loads, open_result(moments_nc), open_result(ccd_nc),
                                cascade_cfg=cascade_cfg, anthropometry=anthropometry)
     upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
     a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d)
@@ -336,7 +336,7 @@ def _surrogate_rows(responses: Mapping[str, str], fem: xr.Dataset, surrogates_cf
 
     rows = []
     for fea, path in responses.items():
-        resp = xr.load_dataset(path)
+        resp = open_result(path)
         sweep_time = float(resp["wall_time_s"].sum())
         ref = _reference_values(fem, fea)
         for reg in [str(r) for r in cv["regressor"].values]:
@@ -369,8 +369,8 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
     joint moments (relative, against direct
     OpenSim sampling, over the test patients inside the design region).
     """
-    fem = xr.load_dataset(fem_nc)
-    cv = xr.load_dataset(cv_nc)
+    fem = open_result(fem_nc)
+    cv = open_result(cv_nc)
     methods, family, wall, setup = [], [], [], []
     quantities: list[str] = list(FD.UNIT_QUANTITIES)
     units = {q: "1" for q in quantities}
@@ -413,8 +413,8 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
         from workflow.unit_model import UnitModel
 
         pi = plan_inputs
-        loads = xr.load_dataset(pi["joint_loads"])
-        finger, _ = patient_finger(pi["patient"], loads, xr.load_dataset(pi["moments"]), xr.load_dataset(pi["ccd"]),
+        loads = open_result(pi["joint_loads"])
+        finger, _ = patient_finger(pi["patient"], loads, open_result(pi["moments"]), open_result(pi["ccd"]),
                                    cascade_cfg=pi["cascade"], anthropometry=pi["anthropometry"])
         c = pi["cascade"]
         targets = {str(e): loads["target_angle_deg"].sel(exercise=e).values for e in loads["exercise"].values}
@@ -446,7 +446,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
                                                                  float(np.sqrt(np.mean(d**2))))
 
     if check_nc:
-        chk = xr.load_dataset(check_nc)
+        chk = open_result(check_nc)
         hs = chk["h_mm"].values
         for e in chk["exercise"].values:
             c = chk.sel(exercise=e)
@@ -475,7 +475,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             setup.append(0.0)
 
     if msk_nc:
-        msk = xr.load_dataset(msk_nc)
+        msk = open_result(msk_nc)
         inside = msk["inside_design"].values.astype(bool)
         for q in msk["quantity"].values:
             quantities.append(f"msk_{q}")

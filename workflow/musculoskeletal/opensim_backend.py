@@ -389,7 +389,9 @@ def scale_factors_of_run(scaling: xr.Dataset, run: int) -> dict[str, tuple[float
 # --- Path-level entry points of the Snakemake rules -------------------------------------------
 
 def _scaling_table(scaling_nc: str | Path) -> xr.Dataset:
-    with xr.open_dataset(scaling_nc) as s:
+    from workflow.provenance import open_result
+
+    with open_result(scaling_nc) as s:
         return s.load()
 
 
@@ -457,11 +459,11 @@ def _sha256(path: str | Path) -> str:
 
 def write_merged(run_files: Sequence[str | Path], out: str | Path, *, rule: str, config_slice: Any) -> xr.Dataset:
     """Rule ``opensim_merge``: the per-run files -> ``moments_opensim.nc`` (``moments.nc`` layout)."""
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
     parts = []
     for f in run_files:
-        with xr.open_dataset(f) as d:
+        with open_result(f) as d:
             parts.append(d.load())
     ds = merge_runs(parts)
     # Encodings read from the per-run files (e.g. a 2-character string width for
