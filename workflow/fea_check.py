@@ -62,6 +62,7 @@ from workflow.fem import STATUS_FLAGS
 from workflow.fem._coupled import CoupledResult, solve_coupled
 from workflow.finger import JOINTS
 from workflow.pressure_limit import PressureLimit, clip_pressures, material_limit, smallest
+from workflow.runlog import solved
 
 __all__ = ["MAPPING_FLAGS", "applied_limit", "pressures_2d", "ExerciseCheck", "outcome", "Correction", "correct_exercise", "check_exercise",
            "gravity_state", "fea_check_dataset", "write_deformed", "run_fea_check", "write_fea_check"]
@@ -235,9 +236,9 @@ def correct_exercise(fea: PatientFEA, ro: CascadeModel, name: str, target_deg: n
         cor.checks.append(chk)
         cor.predicted_deg.append(new.equilibrium.joint_angles_deg)
         ok, score, _ = outcome(chk, target, tolerance_deg, limits_nm)
-        log.info("%s correction %d: plan %s kPa (2D %s) -> FEA %s deg (target %s), %s", name, k,
+        log.info("%s correction %d: plan %s kPa (2D %s) -> FEA %s deg (target %s), status %d, %s", name, k,
                  np.round(p3.ravel(), 1), np.round(p2.ravel(), 1), np.round(chk.angle_deg, 1), target,
-                 "reached" if ok else "not reached")
+                 chk.result.status, "reached" if ok else "not reached", extra=solved(chk.result.status != 0))
         if score < best_score:
             cor.best, best_score = k, score
         if ok:
@@ -447,7 +448,7 @@ def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str]
     grav = gravity_state(fea, solver)
     log.info("gravity: status %d at load factor %.3f, droop %s deg, %d Newton iterations, %.1f s",
              grav.status, grav.load_factor, np.round(grav.joint_angles_deg, 2), grav.newton_iterations,
-             grav.wall_time_s)
+             grav.wall_time_s, extra=solved(grav.status != 0))
     n_cor = int((correction or {}).get("max_iterations", 0)) if ro_plan is not None else 0
     checks, corrections, pred_2d = [], [], []
     for i, name in enumerate(ex):
@@ -459,7 +460,8 @@ def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str]
         log.info("%s: pressures %s kPa -> angles %s deg (target %s, plan %s), status %d at %.3f, %d its, %.1f s",
                  name, np.round(p2[i].ravel(), 1), np.round(c.angle_deg, 1), targets[i],
                  np.round(plan["predicted_angle_deg"].sel(exercise=name).values, 1),
-                 c.result.status, c.result.load_factor, c.result.newton_iterations, c.wall_time_s)
+                 c.result.status, c.result.load_factor, c.result.newton_iterations, c.wall_time_s,
+                 extra=solved(c.result.status != 0) if grav.status == 0 else {})
         checks.append(c)
         if ro_2d is not None:
             pred_2d.append(solve_equilibrium(ro_2d, p2[i].ravel()).joint_angles_deg)

@@ -30,6 +30,7 @@ from workflow.cascade import CHAMBERS, GROUPS
 from workflow.fea_check import MAPPING_FLAGS, applied_limit, load_surrogate_angles, pressures_2d
 from workflow.fem._actuator import solve_standalone
 from workflow.fem._mesh import build_actuator_mesh
+from workflow.runlog import solved
 
 __all__ = ["MODELS", "resample_backbone", "standalone_dataset", "write_standalone"]
 
@@ -85,7 +86,8 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
                 r = solve_standalone(mesh(dim, h), press, material=mat, contact_options=contact, solver=solver)
                 t_case += r.wall_time_s
                 log.info("%s %s (h = %g mm, %d dofs): tip %.1f deg, status %d at %.3f, %d its, %.1f s", ex, m, h,
-                         r.ndofs, r.tip_angle_deg, r.status, r.load_factor, r.newton_iterations, r.wall_time_s)
+                         r.ndofs, r.tip_angle_deg, r.status, r.load_factor, r.newton_iterations, r.wall_time_s,
+                         extra=solved(r.status != 0))
                 if r.status == 0:
                     break
             bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)

@@ -26,6 +26,7 @@ import xarray as xr
 from workflow import fidelity as FD
 from workflow.fem_study import P_STUDY
 from workflow.provenance import open_result, write_dataset
+from workflow.runlog import solved
 
 __all__ = ["fem_table", "write_fem_choice", "write_msk_study",
            "write_check_study", "write_speed_accuracy"]
@@ -198,7 +199,8 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
                                  anthropometry=anthropometry)
             vals[-1, i] = [d[kind, joint, a] for _, _, kind, joint, a in quants]
             wall[-1, i] = time.perf_counter() - t0
-            log.info("direct OpenSim at %s: %.2f s", x, wall[-1, i])
+            log.info("direct OpenSim at %s: %d responses, %.2f s", x, len(quants), wall[-1, i],
+                     extra=solved(int(np.sum(~np.isfinite(vals[-1, i]))), n=len(quants)))
     else:
         note = "no OpenSim model (table backend): direct sampling not available, errors unknown"
         log.warning("fidelity_msk: %s", note)
@@ -281,7 +283,8 @@ def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequen
             ang[i, k], status[i, k] = c.angle_deg, c.result.status
             wall[i, k], pen[i, k] = t_grav + c.wall_time_s, c.result.max_penetration_mm
             log.info("check %s at h = %g mm (%d dofs): %s deg, status %d, %.1f s, penetration %.3f mm", e, h,
-                     ndofs[i], np.round(ang[i, k], 2), status[i, k], wall[i, k], pen[i, k])
+                     ndofs[i], np.round(ang[i, k], 2), status[i, k], wall[i, k], pen[i, k],
+                     extra=solved(status[i, k] != 0))
     chains = {}
     plan_unit = {"2d": surrogate_2d, "3d": surrogate_3d}[cascade_cfg.get("surrogate", "3d")]
     for name, path, p in (("check_chain_plan", plan_unit, p3), ("check_chain_2d", surrogate_2d, p2)):

@@ -18,6 +18,7 @@ import xarray as xr
 
 from workflow import stability as S
 from workflow.provenance import open_result, write_dataset
+from workflow.runlog import solved
 
 __all__ = ["fe_ray_solver", "write_rays", "write_locking", "write_stability", "summary_table"]
 
@@ -94,7 +95,7 @@ def write_locking(out: str | Path, *, locking_cfg: Mapping[str, Any], actuator: 
             st[f].append(int(r.status))
             wall[f].append(float(r.wall_time_s))
             log.info("%s, K/mu0 = %g: angle %.4f deg per unit, status %d, %.2f s", f, k, r.bending_angle_deg,
-                     r.status, r.wall_time_s)
+                     r.status, r.wall_time_s, extra=solved(r.status != 0))
     ds = S.locking_dataset(ks, ang, st, p_top_kpa=float(c["p_top_kpa"]), h_mm=float(c["h_mm"]), wall_time_s=wall)
     ds.attrs["contact"] = int(bool(c["contact"]))
     log.info("locking ratio (plain / mixed) per K/mu0: %s",

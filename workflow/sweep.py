@@ -43,6 +43,7 @@ import numpy as np
 import xarray as xr
 
 from workflow.provenance import open_result, write_dataset
+from workflow.runlog import solved
 
 __all__ = [
     "STATUS_FLAGS",
@@ -405,7 +406,7 @@ def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Seque
             # a 3D ray takes minutes per case: say so as each case ends
             log.info("ray to (%.1f, %.1f) kPa, %s: %s at load factor %.3f, %d steps, %d Newton iterations, %.1f s",
                      p_top, p_bottom, case, r.reason or "converged", r.load_factor, r.steps, r.newton_iterations,
-                     r.wall_time_s)
+                     r.wall_time_s, extra=solved(r.status != 0))
             paths[case] = r
         return samples_from_paths(direction, scales, paths["free"], paths["blocked"])
 

@@ -52,6 +52,7 @@ import numpy as np
 import xarray as xr
 
 from workflow.musculoskeletal import opensim_model as om
+from ..runlog import solved
 
 __all__ = [
     "angle_grid",
@@ -444,7 +445,8 @@ def write_run(
     config_slice = {"config": config_slice, "reference_model_sha256": _sha256(model_path)}
     n_fail = int((ds["status"] == 1).sum())
     log.info("run %s (%s): %d samples in %.2f s, %d failed equilibria", run, marker,
-             int((ds["status"] == 0).sum()), float(ds["wall_time_s"]), n_fail)
+             int((ds["status"] == 0).sum()), float(ds["wall_time_s"]), n_fail,
+             extra=solved(n_fail, n=int((ds["status"] == 0).sum()) + n_fail))
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title=f"OpenSim finger moments, CCD run {run} ({marker})",
                   source="finger-rehab-workflow generated OpenSim finger model (opensim backend)")
