@@ -33,18 +33,16 @@ MODES = ("uniaxial", "equibiaxial", "planar")
 
 @dataclass(frozen=True)
 class Instability:
-    """A stretch range of one mode where the law is not stable (stretches dimensionless)."""
+    """The stretch ranges (dimensionless, as sampled) of one mode where the law is not stable."""
 
     mode: str
-    first: float  # smallest unstable stretch sampled
-    last: float  # largest unstable stretch sampled
-    stress: str  # "Cauchy" or "nominal": which stress stops increasing first
+    ranges: tuple[tuple[float, float], ...]  # (first, last) unstable stretch of each contiguous range
+    stress: str  # "Cauchy" or "nominal": which stress stops increasing at the first unstable stretch
     within: bool  # any unstable stretch inside the required range
 
     def __str__(self) -> str:
-        return (f"{self.mode} mode unstable at stretch {self.first:.3g}"
-                + (f" to {self.last:.3g}" if self.last > self.first else "")
-                + f" ({self.stress} stress does not increase with the stretch)")
+        where = " and ".join(f"{a:.3g}" if a == b else f"{a:.3g}-{b:.3g}" for a, b in self.ranges)
+        return f"{self.mode} mode unstable at stretch {where} ({self.stress} stress does not increase with the stretch)"
 
 
 def mooney_rivlin_mode_stress(c10_mpa: float, c01_mpa: float, c20_mpa: float, stretch, mode: str):
@@ -80,8 +78,8 @@ def drucker_instabilities(c10_mpa: float, c01_mpa: float, c20_mpa: float, *, spa
         bad = cauchy_bad | nominal_bad
         if not bad.any():
             continue
-        i = int(np.flatnonzero(bad)[0])
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(int), [0]])))  # starts, ends + 1
+        ranges = tuple((float(lam[a]), float(lam[b - 1])) for a, b in zip(edges[::2], edges[1::2]))
         inside = bad & (lam >= required[0]) & (lam <= required[1])
-        out.append(Instability(mode, float(lam[bad][0]), float(lam[bad][-1]),
-                               "Cauchy" if cauchy_bad[i] else "nominal", bool(inside.any())))
+        out.append(Instability(mode, ranges, "Cauchy" if cauchy_bad[edges[0]] else "nominal", bool(inside.any())))
     return out
