@@ -23,6 +23,7 @@ from workflow.runlog import solved
 setup_logging(SimpleNamespace(log=[sys.argv[1]], rule="demo"))
 from skfem import Basis, ElementTriP1, MeshTri
 Basis(MeshTri().refined(2), ElementTriP1())  # scikit-fem logs 'Initializing CellBasis...' at INFO
+logging.getLogger("skfem.mesh.mesh").warning("Transforming over 1000 vertices to C_CONTIGUOUS.")  # as it does
 logging.getLogger("workflow.sweep").info("ray 1: converged", extra=solved(False))
 logging.getLogger("workflow.sweep").info("ray 2: stalled", extra=solved(True))
 if sys.argv[2] == "corrupt":
@@ -51,6 +52,7 @@ def test_library_chatter_is_off_and_each_job_ends_with_a_tally(tmp_path):
 def test_the_environment_switch_brings_the_library_lines_back(tmp_path, value):
     _, lines = _job(tmp_path, FINGER_REHAB_VERBOSE_LIBS=value)
     assert any("Initializing CellBasis" in line for line in lines)
+    assert any("C_CONTIGUOUS" in line for line in lines)
 
 
 def test_a_damaged_input_fails_the_job_with_one_line(tmp_path):

@@ -1,9 +1,9 @@
 """Glue shared by the ``script:`` adapters: logging to the rule's log file, once per job.
 
-Third-party INFO lines (scikit-fem's "Initializing CellBasis..." and "Transforming
+Third-party chatter (scikit-fem's "Initializing CellBasis..." and "Transforming
 over 1000 vertices to C_CONTIGUOUS", matplotlib's font cache, numexpr's thread
-count) are off: set ``FINGER_REHAB_VERBOSE_LIBS=1`` in the environment to keep
-them.  Each job's log ends with one summary line, e.g.
+count) is off: set ``FINGER_REHAB_VERBOSE_LIBS=1`` in the environment to keep
+it.  Each job's log ends with one summary line, e.g.
 ``done: 12 solves, 12 converged, 0 failed, 43.2 s`` (solves are counted from
 the lines that report them, see :mod:`workflow.runlog`).
 """
@@ -19,9 +19,10 @@ from pathlib import Path
 
 from workflow.provenance import CorruptInputError
 
-#: Libraries whose INFO chatter would bury the workflow's own lines.
-QUIET_LIBRARIES = ("skfem", "matplotlib", "numexpr", "PIL", "fontTools", "h5py", "urllib3", "mlflow", "alembic",
-                   "git", "numba")
+#: Libraries whose chatter would bury the workflow's own lines, and the least level they still log: scikit-fem
+#: warns at WARNING that it copies a mesh to C order (a speed note, not a problem of the run).
+QUIET_LIBRARIES = {"skfem": logging.ERROR, **{name: logging.WARNING for name in (
+    "matplotlib", "numexpr", "PIL", "fontTools", "h5py", "urllib3", "mlflow", "alembic", "git", "numba")}}
 VERBOSE_ENV = "FINGER_REHAB_VERBOSE_LIBS"
 
 
@@ -39,7 +40,8 @@ class _SolveTally(logging.Handler):
     def summary(self) -> str:
         if not self.solves:
             return ""
-        return f"{self.solves} solves, {self.solves - self.failed} converged, {self.failed} failed, "
+        return (f"{self.solves} solve{'s' if self.solves != 1 else ''}, {self.solves - self.failed} converged, "
+                f"{self.failed} failed, ")
 
 
 def setup_logging(snakemake) -> logging.Logger:  # noqa: ANN001 - Snakemake's object
@@ -61,8 +63,8 @@ def setup_logging(snakemake) -> logging.Logger:  # noqa: ANN001 - Snakemake's ob
         force=True,
     )
     verbose = os.environ.get(VERBOSE_ENV, "").strip().lower() not in ("", "0", "false", "no")
-    for name in QUIET_LIBRARIES:
-        logging.getLogger(name).setLevel(logging.NOTSET if verbose else logging.WARNING)
+    for name, level in QUIET_LIBRARIES.items():
+        logging.getLogger(name).setLevel(logging.NOTSET if verbose else level)
     tally = _SolveTally()
     logging.getLogger().addHandler(tally)
     logger = logging.getLogger(snakemake.rule)
