@@ -24,6 +24,7 @@ rule cascade_plan:
         cascade=config["cascade"],
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
+        pressure_limit=get_pressure_limit(),
         config_slice=get_cascade_slice,
     log:
         "logs/cascade/cascade_plan/{patient}.log",

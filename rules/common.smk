@@ -10,8 +10,9 @@ from workflow.provenance import code_files
 
 validate(config, "../config/schema.yaml")
 # Checks JSON Schema cannot express (cross references between sections),
-# still before any job starts.
-settings.check_config(config)
+# still before any job starts; what is computed but questionable is said here.
+for _warning in settings.check_config(config):
+    logger.warning(f"config: {_warning}")
 
 PATIENTS = sorted(config["patients"])
 
@@ -135,6 +136,12 @@ def get_unit_response():
     return f"results/actuator/surrogate_{config['cascade']['surrogate']}.joblib"
 
 
+def get_pressure_limit():
+    """The silicone's pressure limit and its source (actuator.material): no plan, correction or FEA check exceeds it."""
+    m = config["actuator"]["material"]
+    return {k: m[k] for k in ("p_limit_kpa", "p_limit_source")}
+
+
 def get_cascade_slice(wildcards):
     """Param function: the config one patient's plan depends on (its hash goes into the outputs)."""
     return {
@@ -143,6 +150,7 @@ def get_cascade_slice(wildcards):
         "exercises": config["exercises"],
         "cascade": config["cascade"],
         "unit_model": config["surrogates"]["unit_model"],
+        "pressure_limit": get_pressure_limit(),
     }
 
 

@@ -103,7 +103,8 @@ rule mapping_2d3d:
             category="Actuator",
         ),
     params:
-        config_slice=cfg("sweep", "surrogates"),
+        pressure_limit=get_pressure_limit(),
+        config_slice=cfg("sweep", "surrogates") | {"pressure_limit": get_pressure_limit()},
     log:
         "logs/surrogates/mapping_2d3d.log",
     benchmark:

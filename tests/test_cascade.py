@@ -279,6 +279,18 @@ def test_write_cascade_plan_from_stage_files(tmp_path, caplog):
     outside = (p.max("chamber") > 100.0).values
     assert outside.any() and np.array_equal(~back["pressure_in_sampled_region"].values, outside)
     assert sum("outside the sampled region" in r.getMessage() for r in caplog.records) == int(outside.sum())
+    # the silicone's limit and the surrogate's sampled range bound every planned pressure, and the plan says which
+    from workflow.pressure_limit import PressureLimit
+
+    assert float(p.max()) == pytest.approx(300.0)  # TGE2 is out of reach: its spans sit at cascade.p_max_kpa
+    sampled = LinearUnit()
+    sampled.p_max_kpa = 200.0
+    for unit, material, bound, source in ((LinearUnit(), PressureLimit(150.0, "material"), 150.0, "material"),
+                                          (sampled, PressureLimit(300.0, "material"), 200.0, "sampled")):
+        ds = C.write_cascade_plan("p", {"finger": "F3"}, unit, out_nc=tmp_path / "lim.nc", out_png=None,
+                                  material_limit=material, **kw)
+        assert float(ds["pressure_kpa"].max()) == pytest.approx(bound)
+        assert ds.attrs["p_limit_kpa"] == bound and source in ds.attrs["p_limit_source"]
 
 
 def test_untying_cmc_from_mcp_never_needs_more_pressure():

@@ -149,6 +149,28 @@ def test_pressure_mapping_flags():
     assert flag[0, 0] == 2  # 600 kPa needed
 
 
+def test_applied_pressures_stay_under_the_silicone_limit():
+    from workflow.fea_check import applied_limit
+
+    lim = applied_limit({"material": {"p_limit_kpa": 250.0, "p_limit_source": "test"}}, 300.0)
+    assert lim.kpa == 250.0 and lim.source == "actuator.material.p_limit_kpa: test"
+    assert applied_limit({}, 200.0).kpa == 200.0 and "2D surrogate" in applied_limit({}, 200.0).source
+    p3 = np.array([[[300.0, 0.0], [280.0, 280.0], [100.0, 0.0]]])
+    p2, flag = pressures_2d(p3, None, None, p_max_2d_kpa=np.inf, limit=lim)  # the plan's pressures, unchanged
+    np.testing.assert_array_equal(p2[0], [[250.0, 0.0], [250.0, 250.0], [100.0, 0.0]])
+    assert list(flag[0]) == [4, 4, 3]
+
+    def a3(pt, pb):
+        return 0.05 * (np.asarray(pt) - np.asarray(pb))
+
+    def a2(pt, pb):
+        return 0.025 * (np.asarray(pt) - np.asarray(pb))
+
+    p2, flag = pressures_2d(p3, a3, a2, p_max_2d_kpa=400.0, limit=lim)
+    assert p2.max() <= 250.0
+    assert list(flag[0]) == [2, 4, 0]  # 600 kPa needed: capped at 250; equal pair cut back; 200 kPa mapped
+
+
 @pytest.mark.skipif(not SECTION.exists(), reason="section points not available")
 def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     """Coupled model at a coarse mesh, gravity only: the finger hangs from the straps,

@@ -148,3 +148,30 @@ def test_silicone_constants_are_table_5():
         assert defaults[key]["default"] == pytest.approx(value, rel=1e-9)
         assert fem.DEFAULT_MATERIAL[key] == pytest.approx(value, rel=1e-9)
     assert fem.material_constants({})["mu0"] == pytest.approx(0.716, abs=5e-4)
+
+
+def test_mode_stresses_are_the_energy_derivatives_and_table5_is_drucker_stable():
+    """Nominal stress of each incompressible mode = dW/dl per loaded direction (W along the mode)."""
+    from workflow.material_stability import drucker_instabilities, mooney_rivlin_mode_stress
+
+    c10, c01, c20 = 0.26056762, 0.09754981, 0.05750069
+    stretches = {"uniaxial": lambda l: (l, l**-0.5, l**-0.5), "equibiaxial": lambda l: (l, l, l**-2),
+                 "planar": lambda l: (l, 1.0, 1.0 / l)}
+    loaded = {"uniaxial": 1, "equibiaxial": 2, "planar": 1}
+
+    def energy(mode, lam):
+        a = np.array(stretches[mode](lam)) ** 2
+        i1, i2 = a.sum(), a[0] * a[1] + a[1] * a[2] + a[0] * a[2]
+        return c10 * (i1 - 3) + c01 * (i2 - 3) + c20 * (i1 - 3) ** 2
+
+    for mode in stretches:
+        for lam in (0.4, 0.8, 1.3, 2.5):
+            h = 1e-6
+            dw = (energy(mode, lam + h) - energy(mode, lam - h)) / (2 * h)
+            _, nominal = mooney_rivlin_mode_stress(c10, c01, c20, lam, mode)
+            assert nominal == pytest.approx(dw / loaded[mode], rel=1e-6)
+    assert drucker_instabilities(c10, c01, c20) == []
+    # a softening c20 < 0: the large-stretch end goes first in tension
+    (uni,) = [i for i in drucker_instabilities(0.26, 0.1, -0.01) if i.mode == "uniaxial"]
+    (first, last), = uni.ranges
+    assert 2.0 < first < last == 3.0 and not uni.within

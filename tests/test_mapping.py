@@ -65,22 +65,22 @@ def test_round_trip():
     np.testing.assert_allclose(fwd["scale"] * back["scale"], 1.0, rtol=1e-8)
 
 
+def _fitted(a, fea, regressor):
+    """A surrogate fitted on a sweep of the double theta_2d_of(a)."""
+    def solve(direction, scales):
+        pt, pb = scales * direction[0], scales * direction[1]
+        n = scales.size
+        th = theta_2d_of(a)(pt, pb)
+        return pt, pb, th, 0.001 * th, np.zeros(n, int), np.ones(n, int), np.zeros(n)
+
+    resp = sweep.merge_shards([sweep.run_shard(solve, shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=11,
+                                               n_pressures=12)], n_ratios=11, n_pressures=12)
+    return surrogates.fit_surrogate(resp, regressor, fea=fea)
+
+
 @pytest.mark.parametrize("regressor, tol", [("rbf", 0.01), ("knn", 0.15)])
 def test_on_fitted_surrogates(regressor, tol):
-    def solver_of(a):
-        def solve(direction, scales):
-            pt, pb = scales * direction[0], scales * direction[1]
-            n = scales.size
-            th = theta_2d_of(a)(pt, pb)
-            return pt, pb, th, 0.001 * th, np.zeros(n, int), np.ones(n, int), np.zeros(n)
-        return solve
-
-    def fitted(a, fea):
-        resp = sweep.merge_shards([sweep.run_shard(solver_of(a), shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=11,
-                                                   n_pressures=12)], n_ratios=11, n_pressures=12)
-        return surrogates.fit_surrogate(resp, regressor, fea=fea)
-
-    s3, s2 = fitted(1.0, "3d"), fitted(0.8, "2d")
+    s3, s2 = _fitted(1.0, "3d", regressor), _fitted(0.8, "2d", regressor)
     planned = mapping.read_planned_pressures(TABLE8)
     ds = mapping.mapping_dataset(planned, s3.angle_deg, s2.angle_deg, p_max_2d_kpa=s2.p_max_kpa,
                                  p_max_3d_kpa=s3.p_max_kpa)
@@ -97,3 +97,19 @@ def test_dataset_roundtrip(tmp_path):
     np.testing.assert_allclose(back["pressure_2d_kpa"].values, ds["pressure_2d_kpa"].values)
     np.testing.assert_array_equal(back["reason"].values.astype(str), ds["reason"].values.astype(str))
     assert back["status"].attrs["flag_meanings"] == "mapped equal_pressures outside_2d_grid"
+
+
+def test_mapped_2d_pressures_stay_under_the_silicone_limit(tmp_path):
+    """A weaker 2D unit needs 1.1 x the 3D pressure: within the 2D sweep (300 kPa), never beyond the material limit."""
+    from workflow.pressure_limit import PressureLimit
+
+    paths = {fea: surrogates.save_surrogate(_fitted(a, fea, "rbf"), tmp_path / f"surrogate_{fea}.joblib")
+             for a, fea in ((1.0, "3d"), (1.1, "2d"))}
+    free = mapping.write_mapping(TABLE8, paths["3d"], paths["2d"], tmp_path / "free.nc", config_slice={})
+    assert float(free["pressure_2d_kpa"].max()) > 250.0
+    limit = PressureLimit(250.0, "actuator.material.p_limit_kpa: test")
+    ds = mapping.write_mapping(TABLE8, paths["3d"], paths["2d"], tmp_path / "m.nc", config_slice={},
+                               material_limit=limit)
+    assert float(ds["pressure_2d_kpa"].max()) <= 250.0
+    assert int((ds["status"] == 2).sum()) > int((free["status"] == 2).sum())  # not reached within 250 kPa
+    assert ds.attrs["p_max_2d_kpa"] == 250.0 and ds.attrs["p_limit_source"] == limit.source

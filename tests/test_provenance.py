@@ -49,3 +49,66 @@ def test_code_files_names_an_unknown_module():
 
     with pytest.raises(FileNotFoundError, match="workflow.no_such_module"):
         provenance.code_files("no_such_module")
+
+
+# --- A damaged or foreign input: one line naming the file, what is wrong and the fix ----------------------
+def _response(tmp_path, drop=()):
+    ds = xr.Dataset({v: ("point", np.zeros(3)) for v in ("bending_angle_deg", "bending_moment_nm", "status", "converged",
+                                                          "mirrored", "newton_iterations", "wall_time_s")},
+                    coords={"p_top_kpa": ("point", [0.0, 150.0, 300.0]), "p_bottom_kpa": ("point", np.zeros(3))})
+    return provenance.write_dataset(ds.drop_vars(list(drop)), tmp_path / "results" / "actuator" / "response_3d.nc",
+                                    rule="sweep_merge", config_slice={}, title="t")
+
+
+def _one_line(err, path, *needles):
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(str(path)) and msg.endswith("delete it and rerun: Snakemake recomputes it")
+    for needle in needles:
+        assert needle in msg
+
+
+def test_truncated_netcdf_is_named_with_the_fix(tmp_path):
+    import pytest
+
+    path = _response(tmp_path)
+    assert provenance.open_result(path)["converged"].size == 3
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.raises(provenance.CorruptInputError) as err:
+        provenance.open_result(path)
+    _one_line(err, path, "not a readable netCDF file")
+    path.write_bytes(b"")
+    with pytest.raises(OSError):  # CorruptInputError is an OSError: callers catching those still do
+        provenance.open_result(path)
+
+
+def test_netcdf_without_the_contracts_variables_is_named(tmp_path):
+    import pytest
+
+    path = _response(tmp_path, drop=("converged", "mirrored"))
+    with pytest.raises(provenance.CorruptInputError) as err:
+        provenance.open_result(path)
+    _one_line(err, path, "converged, mirrored")
+    assert provenance.open_result(path, required_vars=("status",))["status"].size == 3  # the caller's own list
+    with pytest.raises(FileNotFoundError):
+        provenance.open_result(tmp_path / "absent.nc")
+
+
+def test_garbage_foreign_or_other_version_joblib_is_named(tmp_path):
+    import joblib
+    import pytest
+
+    from workflow import surrogates
+
+    cases = {"garbage.joblib": (b"\x80\x04 not a pickle at all", "not a readable joblib file"),
+             "foreign.joblib": ({"weights": [1, 2]}, "holds dict, not a surrogate"),
+             "old.joblib": ({"surrogate": surrogates.Surrogate("3d", "knn", {}, 300.0, 0), "sklearn_version": "0.1"},
+                            "fitted with scikit-learn 0.1")}
+    for name, (content, needle) in cases.items():
+        path = tmp_path / name
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            joblib.dump(content, path)
+        with pytest.raises(provenance.CorruptInputError) as err:
+            surrogates.load_surrogate(path)
+        _one_line(err, path, needle)

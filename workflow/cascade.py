@@ -743,14 +743,32 @@ def patient_cascade(finger: Finger, unit: Any, cascade_cfg: Mapping[str, Any],
     )
 
 
-def plan_options(cascade_cfg: Mapping[str, Any], active_limits_nm: Sequence[float] | None) -> dict[str, Any]:
+def plan_limit(cascade_cfg: Mapping[str, Any], unit: Any = None, material: Any = None):
+    """The bound (:class:`workflow.pressure_limit.PressureLimit`, kPa) of every planned pressure.
+
+    The smallest of ``cascade.p_max_kpa``, the silicone's limit ``material``
+    and the range the unit's surrogate was sampled on (``unit.p_max_kpa``):
+    a plan never stands on an extrapolated unit response.
+    """
+    from workflow.pressure_limit import PressureLimit, smallest
+
+    sampled = getattr(unit, "p_max_kpa", None)
+    return smallest(PressureLimit(float(cascade_cfg["p_max_kpa"]), "cascade.p_max_kpa"), material,
+                    None if sampled is None else
+                    PressureLimit(float(sampled), "the range the unit surrogate's sweep sampled"))
+
+
+def plan_options(cascade_cfg: Mapping[str, Any], active_limits_nm: Sequence[float] | None,
+                 limit: Any = None) -> dict[str, Any]:
     """Keywords of :func:`plan_exercise` from the config's ``cascade`` section and the patient's active limits (N m).
 
-    One definition for the plan, the FEA check's correction step and the
+    ``limit`` (a :func:`plan_limit`) tightens ``cascade.p_max_kpa``.  One
+    definition for the plan, the FEA check's correction step and the
     speed-accuracy study's plans, so all three plan alike.
     """
     c = cascade_cfg
-    return {"tol_deg": float(c["tolerance_deg"]), "p_max_kpa": float(c["p_max_kpa"]),
+    p_max = min(float(c["p_max_kpa"]), np.inf if limit is None else float(limit.kpa))
+    return {"tol_deg": float(c["tolerance_deg"]), "p_max_kpa": p_max,
             "tie_cmc_mcp": bool(c["tie_cmc_mcp"]), "margin_deg": float(c["margin_deg"]),
             "active_limits_nm": None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float))}
 
@@ -771,11 +789,15 @@ def write_cascade_plan(
     rule: str = "cascade_plan",
     sampled_region: Any = None,
     notes: Mapping[str, str] | None = None,
+    material_limit: Any = None,
 ):
     """Build the patient's finger and actuator, plan every exercise, write the plan (and poses plot).
 
     ``unit`` is the unit response object (see :class:`UnitResponse`);
-    ``cascade_cfg`` the config's ``cascade`` section.  ``sampled_region`` (a
+    ``cascade_cfg`` the config's ``cascade`` section; ``material_limit`` the
+    silicone's pressure limit (:func:`workflow.pressure_limit.material_limit`):
+    no planned pressure exceeds :func:`plan_limit`, recorded in the attrs
+    ``p_limit_kpa`` and ``p_limit_source``.  ``sampled_region`` (a
     `workflow.stability.SampledRegion` of the surrogate's sweep), if given,
     flags planned (P_T, P_B) pairs outside the converged FE samples or nearest
     a failed one: ``pressure_in_sampled_region`` and a warning in the log.
@@ -786,12 +808,12 @@ def write_cascade_plan(
 
     import xarray as xr
 
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
     log = logging.getLogger(__name__)
     c = cascade_cfg
-    loads = xr.load_dataset(joint_loads_nc)
-    fing, spring_note = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+    loads = open_result(joint_loads_nc)
+    fing, spring_note = patient_finger(patient, loads, open_result(moments_nc), open_result(ccd_nc),
                                        cascade_cfg=c, anthropometry=anthropometry)
     finger_name = str(patient.get("finger", "F3"))
     model = patient_cascade(fing, unit, c)
@@ -800,17 +822,22 @@ def write_cascade_plan(
                for e in loads["exercise"].values}
     log.info("patient %s: units per group %s, finger masses %s kg (%s); springs: %s", patient_name,
              model.n_per_group, np.round(fing.masses_kg, 4), fing.mass_source, spring_note)
+    limit = plan_limit(c, unit, material_limit)
+    log.info("patient %s: every planned pressure <= %s", patient_name, limit)
     t0 = time.perf_counter()
     plans = []
     for name, t in targets.items():
-        p = plan_exercise(model, t, exercise=name, **plan_options(c, limits))
+        p = plan_exercise(model, t, exercise=name, **plan_options(c, limits, limit))
+        if np.any(p.pressures_kpa > limit.kpa):  # the search is bounded: this is a bug, not a plan to write
+            raise RuntimeError(f"patient {patient_name} {name}: planned {p.pressures_kpa.max():.1f} kPa above {limit}")
         log.info("%s: %s pressures %s kPa, predicted %s deg (target %s) %s", name,
                  "reached" if p.achieved else "NOT reached", np.round(p.pressures_kpa, 1),
                  np.round(p.equilibrium.joint_angles_deg, 1), t, p.reason)
         plans.append(p)
     ds = plans_dataset(model, plans, tol_deg=c["tolerance_deg"], active_limits_nm=limits,
                        notes={"patient": patient_name, "finger": finger_name, "springs": spring_note,
-                              "planning_wall_time_s": round(time.perf_counter() - t0, 3), **dict(notes or {})})
+                              "planning_wall_time_s": round(time.perf_counter() - t0, 3),
+                              "p_limit_kpa": limit.kpa, "p_limit_source": limit.source, **dict(notes or {})})
     if sampled_region is not None:
         # the surrogate is an extrapolation outside its samples (issue 7 item 2): flag, do not stop
         from workflow.stability import flag_pressure_table

@@ -13,7 +13,9 @@ angle with the 2D-to-3D mapping (:func:`workflow.mapping.map_pairs`), as the
 paper's Table 9 did; pairs with P_T = P_B keep their pressures (no bend either
 way), pairs whose 3D angle lies beyond the 2D sweep are capped at its edge
 (``mapping_status`` records both).  ``map_pressures: false`` applies the plan's
-pressures unchanged.
+pressures unchanged.  No applied pressure exceeds the silicone's limit
+(``actuator.material.p_limit_kpa``) or, when mapped, the 2D sweep's range
+(:mod:`workflow.pressure_limit`); a pair cut back to it is flagged too.
 
 Outcome per exercise: joint angles from the bones' orientations, error
 against the targets (Table 1) and against the plan's reduced-order
@@ -59,40 +61,55 @@ from workflow.fea_model import PatientFEA
 from workflow.fem import STATUS_FLAGS
 from workflow.fem._coupled import CoupledResult, solve_coupled
 from workflow.finger import JOINTS
+from workflow.pressure_limit import PressureLimit, clip_pressures, material_limit, smallest
+from workflow.runlog import solved
 
-__all__ = ["MAPPING_FLAGS", "pressures_2d", "ExerciseCheck", "outcome", "Correction", "correct_exercise", "check_exercise",
+__all__ = ["MAPPING_FLAGS", "applied_limit", "pressures_2d", "ExerciseCheck", "outcome", "Correction", "correct_exercise", "check_exercise",
            "gravity_state", "fea_check_dataset", "write_deformed", "run_fea_check", "write_fea_check"]
 
 log = logging.getLogger(__name__)
 
 #: How each 2D pressure pair was obtained.
-MAPPING_FLAGS = {0: "mapped", 1: "equal_pressures_kept", 2: "capped_at_2d_grid_edge", 3: "unchanged"}
+MAPPING_FLAGS = {0: "mapped", 1: "equal_pressures_kept", 2: "capped_at_2d_grid_edge", 3: "unchanged",
+                 4: "cut_back_to_the_pressure_limit"}
+
+
+def applied_limit(actuator_cfg: Mapping | None, p_max_2d_kpa: float = np.inf) -> PressureLimit:
+    """Bound (kPa) of every pressure applied to a 2D model: the silicone's limit and the 2D sweep's range."""
+    return smallest(material_limit((actuator_cfg or {}).get("material")),
+                    PressureLimit(float(p_max_2d_kpa), "the range the 2D surrogate's sweep sampled"))
 
 
 def pressures_2d(p3: np.ndarray, angle_3d: Callable | None, angle_2d: Callable | None, *, p_max_2d_kpa: float,
-                 p_max_3d_kpa: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+                 p_max_3d_kpa: float = np.inf, limit: PressureLimit | None = None) -> tuple[np.ndarray, np.ndarray]:
     """2D pressures (..., 2) for 3D pairs ``p3`` (..., 2: top, bottom) in kPa, and the mapping flag per pair.
 
     Without surrogates (``angle_3d`` is None) the pressures are returned
-    unchanged (flag 3).
+    unchanged (flag 3).  Every pressure returned is at most ``p_max_2d_kpa``
+    and ``limit`` (:func:`applied_limit`); a pair cut back to that is flag 4.
     """
     p3 = np.asarray(p3, float)
+    limit = smallest(limit, PressureLimit(float(p_max_2d_kpa), "the 2D pressure range"))
     if angle_3d is None or angle_2d is None:
-        return p3.copy(), np.full(p3.shape[:-1], 3, dtype=np.int8)
-    from workflow.mapping import map_pairs
+        p2, flag = p3.copy(), np.full(p3.shape[:-1], 3, dtype=np.int8)
+    else:
+        from workflow.mapping import map_pairs
 
-    r = map_pairs(p3[..., 0], p3[..., 1], angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa)
-    p2 = np.stack([r["p_top_2d_kpa"], r["p_bottom_2d_kpa"]], axis=-1)
-    flag = np.zeros(p3.shape[:-1], dtype=np.int8)
-    eq = r["status"] == 1
-    p2[eq] = p3[eq]
-    flag[eq] = 1
-    out = r["status"] == 2
-    pmax = np.maximum(p3[..., 0], p3[..., 1])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.where(pmax > 0, p_max_2d_kpa / pmax, 1.0)
-    p2[out] = p3[out] * s[out][..., None]
-    flag[out] = 2
+        p_edge = limit.kpa  # the search stays inside the limit: "not reached" rather than a pair beyond it
+        r = map_pairs(p3[..., 0], p3[..., 1], angle_3d, angle_2d, p_max_2d_kpa=p_edge, p_max_3d_kpa=p_max_3d_kpa)
+        p2 = np.stack([r["p_top_2d_kpa"], r["p_bottom_2d_kpa"]], axis=-1)
+        flag = np.zeros(p3.shape[:-1], dtype=np.int8)
+        eq = r["status"] == 1
+        p2[eq] = p3[eq]
+        flag[eq] = 1
+        out = r["status"] == 2
+        pmax = np.maximum(p3[..., 0], p3[..., 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.where(pmax > 0, p_edge / pmax, 1.0)
+        p2[out] = p3[out] * s[out][..., None]
+        flag[out] = 2
+    p2, cut = clip_pressures(p2, limit, what="pressures applied to the 2D model")
+    flag[cut.any(axis=-1)] = 4
     return p2, flag
 
 
@@ -219,9 +236,9 @@ def correct_exercise(fea: PatientFEA, ro: CascadeModel, name: str, target_deg: n
         cor.checks.append(chk)
         cor.predicted_deg.append(new.equilibrium.joint_angles_deg)
         ok, score, _ = outcome(chk, target, tolerance_deg, limits_nm)
-        log.info("%s correction %d: plan %s kPa (2D %s) -> FEA %s deg (target %s), %s", name, k,
+        log.info("%s correction %d: plan %s kPa (2D %s) -> FEA %s deg (target %s), status %d, %s", name, k,
                  np.round(p3.ravel(), 1), np.round(p2.ravel(), 1), np.round(chk.angle_deg, 1), target,
-                 "reached" if ok else "not reached")
+                 chk.result.status, "reached" if ok else "not reached", extra=solved(chk.result.status != 0))
         if score < best_score:
             cor.best, best_score = k, score
         if ok:
@@ -404,8 +421,12 @@ def load_surrogate_angles(surrogate_2d: str | None, surrogate_3d: str | None):
 def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str] | None, solver: Mapping,
                   tolerance_deg: float, angle_3d=None, angle_2d=None, p_max_2d_kpa: float = np.inf,
                   p_max_3d_kpa: float = np.inf, ro_plan=None, ro_2d=None, correction: Mapping | None = None,
-                  plan_opts: Mapping | None = None, notes: Mapping[str, Any] | None = None):
+                  plan_opts: Mapping | None = None, limit_2d: PressureLimit | None = None,
+                  notes: Mapping[str, Any] | None = None):
     """Gravity state, then every exercise -> (dataset, checks, gravity result, corrections).
+
+    ``limit_2d`` (:func:`applied_limit`) bounds every pressure applied, the
+    correction step's too.
 
     ``ro_plan`` / ``ro_2d``: the reduced-order chain (``CascadeModel``) with
     the plan's and with the 2D unit surrogate; ``correction``: ``{max_iterations,
@@ -418,7 +439,8 @@ def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str]
     p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
 
     def to_2d(p3):
-        return pressures_2d(p3, angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa)
+        return pressures_2d(p3, angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa,
+                            limit=limit_2d)
 
     p2, flag = to_2d(p_plan)
     targets = plan["target_angle_deg"].sel(exercise=ex, joint=list(JOINTS)).values
@@ -426,7 +448,7 @@ def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str]
     grav = gravity_state(fea, solver)
     log.info("gravity: status %d at load factor %.3f, droop %s deg, %d Newton iterations, %.1f s",
              grav.status, grav.load_factor, np.round(grav.joint_angles_deg, 2), grav.newton_iterations,
-             grav.wall_time_s)
+             grav.wall_time_s, extra=solved(grav.status != 0))
     n_cor = int((correction or {}).get("max_iterations", 0)) if ro_plan is not None else 0
     checks, corrections, pred_2d = [], [], []
     for i, name in enumerate(ex):
@@ -438,7 +460,8 @@ def run_fea_check(fea: PatientFEA, plan: xr.Dataset, *, exercises: Sequence[str]
         log.info("%s: pressures %s kPa -> angles %s deg (target %s, plan %s), status %d at %.3f, %d its, %.1f s",
                  name, np.round(p2[i].ravel(), 1), np.round(c.angle_deg, 1), targets[i],
                  np.round(plan["predicted_angle_deg"].sel(exercise=name).values, 1),
-                 c.result.status, c.result.load_factor, c.result.newton_iterations, c.wall_time_s)
+                 c.result.status, c.result.load_factor, c.result.newton_iterations, c.wall_time_s,
+                 extra=solved(c.result.status != 0) if grav.status == 0 else {})
         checks.append(c)
         if ro_2d is not None:
             pred_2d.append(solve_equilibrium(ro_2d, p2[i].ravel()).joint_angles_deg)
@@ -469,13 +492,13 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
     the reduced-order chains are built too: the 2D-unit prediction and the
     correction step (config ``fea_check.correction``).
     """
-    from workflow.cascade import patient_cascade, patient_finger, plan_options
+    from workflow.cascade import patient_cascade, patient_finger, plan_limit, plan_options
     from workflow.fea_model import build_patient_fea
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
-    plan = xr.load_dataset(plan_nc)
-    loads = xr.load_dataset(joint_loads_nc)
-    finger, spring_note = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+    plan = open_result(plan_nc)
+    loads = open_result(joint_loads_nc)
+    finger, spring_note = patient_finger(patient, loads, open_result(moments_nc), open_result(ccd_nc),
                                          cascade_cfg=cascade_cfg, anthropometry=anthropometry)
     upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
     fea = build_patient_fea(finger, upg, actuator_cfg=actuator_cfg, cascade_cfg=cascade_cfg,
@@ -494,15 +517,21 @@ def write_fea_check(patient_name: str, patient: Mapping[str, Any], *, plan_nc: s
         ro_2d = patient_cascade(finger, load_unit_model(surrogate_2d, **unit_model_cfg), cascade_cfg, upg)
         ro_plan = patient_cascade(finger, load_unit_model(units[cascade_cfg.get("surrogate", "3d")], **unit_model_cfg),
                                   cascade_cfg, upg)
+    material = material_limit(actuator_cfg.get("material"))
+    limit_plan = plan_limit(cascade_cfg, None if ro_plan is None else ro_plan.unit, material)
+    limit_2d = applied_limit(actuator_cfg, pm2)
+    log.info("patient %s: re-planned pressures <= %s; applied pressures <= %s", patient_name, limit_plan, limit_2d)
     plan_opts = plan_options(cascade_cfg, plan["active_limit_nm"].sel(joint=list(JOINTS)).values
-                             if "active_limit_nm" in plan else None)
+                             if "active_limit_nm" in plan else None, limit_plan)
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     ds, checks, grav, corrections = run_fea_check(fea, plan, exercises=fea_cfg.get("exercises") or None, solver=solver,
                                      tolerance_deg=float(cascade_cfg["tolerance_deg"]), angle_3d=a3, angle_2d=a2,
                                      p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, ro_plan=ro_plan, ro_2d=ro_2d,
-                                     correction=fea_cfg.get("correction"), plan_opts=plan_opts,
+                                     correction=fea_cfg.get("correction"), plan_opts=plan_opts, limit_2d=limit_2d,
                                      notes={"patient": patient_name, "springs": spring_note,
+                                            "p_limit_kpa": limit_2d.kpa, "p_limit_source": limit_2d.source,
+                                            "p_limit_plan_kpa": limit_plan.kpa, "p_limit_plan_source": limit_plan.source,
                                             "pressures": "2D-to-3D mapped" if a3 is not None else "plan's, unchanged",
                                             "h_actuator_mm": float(fea_cfg.get("h_actuator_mm", 2.0)),
                                             **dict(notes or {})})

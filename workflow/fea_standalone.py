@@ -27,9 +27,10 @@ import xarray as xr
 
 from workflow import fem
 from workflow.cascade import CHAMBERS, GROUPS
-from workflow.fea_check import MAPPING_FLAGS, load_surrogate_angles, pressures_2d
+from workflow.fea_check import MAPPING_FLAGS, applied_limit, load_surrogate_angles, pressures_2d
 from workflow.fem._actuator import solve_standalone
 from workflow.fem._mesh import build_actuator_mesh
+from workflow.runlog import solved
 
 __all__ = ["MODELS", "resample_backbone", "standalone_dataset", "write_standalone"]
 
@@ -89,7 +90,8 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
                                      formulation=formulation)
                 t_case += r.wall_time_s
                 log.info("%s %s (h = %g mm, %d dofs): tip %.1f deg, status %d at %.3f, %d its, %.1f s", ex, m, h,
-                         r.ndofs, r.tip_angle_deg, r.status, r.load_factor, r.newton_iterations, r.wall_time_s)
+                         r.ndofs, r.tip_angle_deg, r.status, r.load_factor, r.newton_iterations, r.wall_time_s,
+                         extra=solved(r.status != 0))
                 if r.status == 0:
                     break
             bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)
@@ -140,16 +142,16 @@ def write_standalone(patient_name: str, *, plan_nc: str, out_nc: str, out_png: s
                      actuator_cfg: Mapping, cascade_cfg: Mapping, config_slice: Any, surrogate_2d: str | None = None,
                      surrogate_3d: str | None = None, rule: str = "standalone_actuator") -> xr.Dataset:
     """The rule's entry point (see the module docstring)."""
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
-    plan = xr.load_dataset(plan_nc)
+    plan = open_result(plan_nc)
     sa = dict(fea_cfg.get("standalone", {}))
     ex = list(sa.get("exercises") or fea_cfg.get("exercises") or [str(e) for e in plan["exercise"].values])
     models = list(sa.get("models", MODELS))
     use_map = bool(fea_cfg.get("map_pressures", True)) and cascade_cfg.get("surrogate", "3d") == "3d"
     a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
     p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
-    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
+    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     ds = standalone_dataset(plan, exercises=ex, models=models, actuator_cfg=actuator_cfg,

@@ -18,6 +18,7 @@ import numpy as np
 import xarray as xr
 
 from workflow.provenance import write_dataset
+from workflow.runlog import solved
 
 __all__ = ["P_STUDY", "FemCase", "fem_cases", "case_actuator", "write_fem_case"]
 
@@ -83,7 +84,8 @@ def write_fem_case(case_name: str, out: str | Path, *, actuator: Mapping[str, An
     ds.attrs.update({"case": case.name, "model": case.model, "h_mm": case.h_mm, "contact": int(case.contact)})
     log.info("%s: free %s deg, blocked %s N m, status %s, %.1f s", case.name,
              np.round(ds["bending_angle_deg"].values, 3), np.round(ds["bending_moment_nm"].values, 4),
-             ds["status"].values.ravel().tolist(), wall)
+             ds["status"].values.ravel().tolist(), wall,
+             extra=solved(int(np.count_nonzero(ds["status"].values)), n=int(ds["status"].size)))
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title=f"FE unit fidelity {case.name}: free angle and blocked moment at P_T = 60/180/300 kPa")
     return ds

@@ -25,7 +25,8 @@ import xarray as xr
 
 from workflow import fidelity as FD
 from workflow.fem_study import P_STUDY
-from workflow.provenance import write_dataset
+from workflow.provenance import open_result, write_dataset
+from workflow.runlog import solved
 
 __all__ = ["fem_table", "write_fem_choice", "write_msk_study",
            "write_check_study", "write_speed_accuracy"]
@@ -94,7 +95,7 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
     largest over the quantities, each divided by its bound (so <= 1 means
     within); it must have reached every point.  The reference itself has error 0.
     """
-    table = fem_table([xr.load_dataset(f) for f in case_files])
+    table = fem_table([open_result(f) for f in case_files])
     tol = tolerance if isinstance(tolerance, Mapping) else {"angle": float(tolerance), "moment": float(tolerance)}
     bound = xr.DataArray([float(tol[str(q).split("_")[0]]) for q in table["quantity"].values], dims="quantity",
                          coords={"quantity": table["quantity"].values})
@@ -168,8 +169,8 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
     from workflow.pipeline import design_from_ccd
 
     design = design_from_ccd(ccd_nc)
-    responses = responses_from_moments(xr.load_dataset(moments_nc), exercises)
-    rsm_ds = xr.load_dataset(rsm_nc)
+    responses = responses_from_moments(open_result(moments_nc), exercises)
+    rsm_ds = open_result(rsm_nc)
     quants = [q for q in _msk_quantities(exercises, finger) if q[1] in responses]
     forms = [str(f) for f in rsm_ds["form"].values]
     selected = {q[1]: forms[int(np.argmax(rsm_ds["selected"].sel(response=q[1]).values))] for q in quants}
@@ -198,7 +199,8 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
                                  anthropometry=anthropometry)
             vals[-1, i] = [d[kind, joint, a] for _, _, kind, joint, a in quants]
             wall[-1, i] = time.perf_counter() - t0
-            log.info("direct OpenSim at %s: %.2f s", x, wall[-1, i])
+            log.info("direct OpenSim at %s: %d responses, %.2f s", x, len(quants), wall[-1, i],
+                     extra=solved(int(np.sum(~np.isfinite(vals[-1, i]))), n=len(quants)))
     else:
         note = "no OpenSim model (table backend): direct sampling not available, errors unknown"
         log.warning("fidelity_msk: %s", note)
@@ -244,20 +246,20 @@ def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequen
     unit's at the applied pressures) with their time as the cheap stand-ins.
     """
     from workflow.cascade import patient_cascade, patient_finger, solve_equilibrium
-    from workflow.fea_check import check_exercise, gravity_state, load_surrogate_angles, pressures_2d
+    from workflow.fea_check import applied_limit, check_exercise, gravity_state, load_surrogate_angles, pressures_2d
     from workflow.fea_model import build_patient_fea
     from workflow.finger import JOINTS
     from workflow.unit_model import load_unit_model
 
-    plan = xr.load_dataset(plan_nc)
-    loads = xr.load_dataset(joint_loads_nc)
-    finger, _ = patient_finger(patient, loads, xr.load_dataset(moments_nc), xr.load_dataset(ccd_nc),
+    plan = open_result(plan_nc)
+    loads = open_result(joint_loads_nc)
+    finger, _ = patient_finger(patient, loads, open_result(moments_nc), open_result(ccd_nc),
                                cascade_cfg=cascade_cfg, anthropometry=anthropometry)
     upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
     a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d)
     ex = [str(e) for e in exercises]
     p3 = plan["pressure_kpa"].sel(exercise=ex).values
-    p2, _ = pressures_2d(p3, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
+    p2, _ = pressures_2d(p3, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     hs = sorted((float(h) for h in h_mm), reverse=True)
@@ -281,7 +283,8 @@ def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequen
             ang[i, k], status[i, k] = c.angle_deg, c.result.status
             wall[i, k], pen[i, k] = t_grav + c.wall_time_s, c.result.max_penetration_mm
             log.info("check %s at h = %g mm (%d dofs): %s deg, status %d, %.1f s, penetration %.3f mm", e, h,
-                     ndofs[i], np.round(ang[i, k], 2), status[i, k], wall[i, k], pen[i, k])
+                     ndofs[i], np.round(ang[i, k], 2), status[i, k], wall[i, k], pen[i, k],
+                     extra=solved(status[i, k] != 0))
     chains = {}
     plan_unit = {"2d": surrogate_2d, "3d": surrogate_3d}[cascade_cfg.get("surrogate", "3d")]
     for name, path, p in (("check_chain_plan", plan_unit, p3), ("check_chain_2d", surrogate_2d, p2)):
@@ -336,7 +339,7 @@ def _surrogate_rows(responses: Mapping[str, str], fem: xr.Dataset, surrogates_cf
 
     rows = []
     for fea, path in responses.items():
-        resp = xr.load_dataset(path)
+        resp = open_result(path)
         sweep_time = float(resp["wall_time_s"].sum())
         ref = _reference_values(fem, fea)
         for reg in [str(r) for r in cv["regressor"].values]:
@@ -369,8 +372,8 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
     joint moments (relative, against direct
     OpenSim sampling, over the test patients inside the design region).
     """
-    fem = xr.load_dataset(fem_nc)
-    cv = xr.load_dataset(cv_nc)
+    fem = open_result(fem_nc)
+    cv = open_result(cv_nc)
     methods, family, wall, setup = [], [], [], []
     quantities: list[str] = list(FD.UNIT_QUANTITIES)
     units = {q: "1" for q in quantities}
@@ -409,15 +412,14 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             cells[name, f"cv_{t}"] = (float(c["rmse"].mean("fold")), nrmse)
 
     if plan_inputs:
-        from workflow.cascade import patient_cascade, patient_finger, plan_options, plan_patient
+        from workflow.cascade import patient_cascade, patient_finger, plan_limit, plan_options, plan_patient
         from workflow.unit_model import UnitModel
 
         pi = plan_inputs
-        loads = xr.load_dataset(pi["joint_loads"])
-        finger, _ = patient_finger(pi["patient"], loads, xr.load_dataset(pi["moments"]), xr.load_dataset(pi["ccd"]),
+        loads = open_result(pi["joint_loads"])
+        finger, _ = patient_finger(pi["patient"], loads, open_result(pi["moments"]), open_result(pi["ccd"]),
                                    cascade_cfg=pi["cascade"], anthropometry=pi["anthropometry"])
         c = pi["cascade"]
-        opts = plan_options(c, loads["active_limit_nm"].values)
         targets = {str(e): loads["target_angle_deg"].sel(exercise=e).values for e in loads["exercise"].values}
         plan_fea = c.get("surrogate", "3d")
         cand = [r for r in rows if r[1] == f"surrogate_{plan_fea}"]
@@ -427,6 +429,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
         for name, _, _, _, s_t, _, s in cand:
             unit = UnitModel.from_surrogate(s, **pi["unit_model"])
             ro = patient_cascade(finger, unit, c)
+            opts = plan_options(c, loads["active_limit_nm"].values, plan_limit(c, unit))  # no plan beyond the samples
             t0 = time.perf_counter()
             plans[name] = {p.exercise: p.pressures_kpa for p in plan_patient(ro, targets, **opts)}
             t_plan = (time.perf_counter() - t0) / len(targets)  # one evaluation = one exercise's plan
@@ -446,7 +449,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
                                                                  float(np.sqrt(np.mean(d**2))))
 
     if check_nc:
-        chk = xr.load_dataset(check_nc)
+        chk = open_result(check_nc)
         hs = chk["h_mm"].values
         for e in chk["exercise"].values:
             c = chk.sel(exercise=e)
@@ -475,7 +478,7 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             setup.append(0.0)
 
     if msk_nc:
-        msk = xr.load_dataset(msk_nc)
+        msk = open_result(msk_nc)
         inside = msk["inside_design"].values.astype(bool)
         for q in msk["quantity"].values:
             quantities.append(f"msk_{q}")

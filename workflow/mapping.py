@@ -168,18 +168,24 @@ def mapping_dataset(
 
 
 def write_mapping(planned_csv: str | Path, surrogate_3d: str | Path, surrogate_2d: str | Path, out: str | Path, *,
-                  config_slice, rule: str = "mapping_2d3d", plot: str | Path | None = None) -> xr.Dataset:
+                  config_slice, rule: str = "mapping_2d3d", plot: str | Path | None = None,
+                  material_limit=None) -> xr.Dataset:
     """Map Table 8 with the fitted 3D and 2D surrogates -> ``mapping_2d3d.nc`` (and the Fig. 17-like plot).
 
-    The 2D grid's edge is the 2D surrogate's training range (its sweep's p_max).
+    The 2D grid's edge is the smaller of the 2D surrogate's training range (its
+    sweep's p_max) and the silicone's limit ``material_limit``
+    (:func:`workflow.pressure_limit.material_limit`): no 2D pair beyond either.
     """
+    from workflow.pressure_limit import PressureLimit, smallest
     from workflow.surrogates import load_surrogate
 
     s3, s2 = load_surrogate(surrogate_3d), load_surrogate(surrogate_2d)
+    limit = smallest(material_limit, PressureLimit(float(s2.p_max_kpa), "the range the 2D surrogate's sweep sampled"))
     ds = mapping_dataset(read_planned_pressures(planned_csv), s3.angle_deg, s2.angle_deg,
-                         p_max_2d_kpa=s2.p_max_kpa, p_max_3d_kpa=s3.p_max_kpa)
+                         p_max_2d_kpa=limit.kpa, p_max_3d_kpa=s3.p_max_kpa)
     ds.attrs["surrogate_3d"] = s3.regressor
     ds.attrs["surrogate_2d"] = s2.regressor
+    ds.attrs["p_limit_source"] = limit.source
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title="2D pressures of the same ratio and free angle as the planned 3D pressures (Table 8)")
     if plot is not None:

@@ -19,7 +19,7 @@ import xarray as xr
 from . import doe
 from .musculoskeletal import moments as msm
 from .musculoskeletal import patient_loads, rsm, table_backend
-from .provenance import write_dataset
+from .provenance import open_result, write_dataset
 
 __all__ = [
     "design_from_ccd",
@@ -37,7 +37,7 @@ log = logging.getLogger(__name__)
 
 def design_from_ccd(path: str | Path) -> pd.DataFrame:
     """Read ``ccd.nc`` back as the design frame (index ``run``)."""
-    with xr.open_dataset(path) as ds:
+    with open_result(path) as ds:
         df = pd.DataFrame({f: ds[f].values for f in doe.FACTORS}, index=pd.Index(ds["run"].values, name="run"))
         df.insert(0, "marker", ds["marker"].values.astype(str))
     return df
@@ -64,7 +64,7 @@ def write_scaling(ccd: str | Path, out: str | Path, scaling: Mapping, anthropome
 
 
 def write_scaling_validation(scaling_nc: str | Path, table_csv: str | Path, out: str | Path, *, rule: str = "validate_scaling") -> xr.Dataset:
-    with xr.open_dataset(scaling_nc) as s:
+    with open_result(scaling_nc) as s:
         scale = s["scale"].load()
         design = pd.DataFrame({"marker": s["marker"].values.astype(str)}, index=s["run"].values)
     table = pd.read_csv(table_csv)
@@ -89,7 +89,7 @@ def write_moments_from_table(ccd: str | Path, table: str | Path, out: str | Path
 
 def write_selected_moments(source: str | Path, out: str | Path, backend: str, *, rule: str = "joint_moments") -> xr.Dataset:
     """Publish the chosen backend's samples as ``moments.nc`` (same layout, new provenance)."""
-    with xr.open_dataset(source) as src:
+    with open_result(source) as src:
         ds = src.load()
     ds.attrs = {"backend": backend, "backend_file": str(source), "backend_git_commit": src.attrs.get("git_commit", "")}
     write_dataset(ds, out, rule=rule, config_slice={"backend": backend},
@@ -100,7 +100,7 @@ def write_selected_moments(source: str | Path, out: str | Path, backend: str, *,
 def write_rsm(ccd: str | Path, moments_nc: str | Path, out: str | Path, exercises: Mapping, alpha: float,
               *, rule: str = "rsm", plot: str | Path | None = None) -> xr.Dataset:
     design = design_from_ccd(ccd)
-    with xr.open_dataset(moments_nc) as m:
+    with open_result(moments_nc) as m:
         responses = msm.responses_from_moments(m.load(), exercises)
     if not responses:
         raise ValueError(f"{moments_nc}: no response has data at every run for the exercises' target angles")
@@ -133,7 +133,7 @@ def write_joint_loads(patient_name: str, patient: Mapping, ccd: str | Path, mome
 
     design = design_from_ccd(ccd)
     x = patient_loads.patient_levels(patient, anthropometry["measures"], anthropometry.get("coded_unit_sd", 1.0))
-    study = xr.load_dataset(msk_study) if msk_study else None
+    study = open_result(msk_study) if msk_study else None
     method, why = loads_method(study, x, tolerance, model_available=model_osim is not None)
     direct = None
     if method == "opensim_direct":
@@ -144,7 +144,7 @@ def write_joint_loads(patient_name: str, patient: Mapping, ccd: str | Path, mome
                                   scaling_cfg=scaling, anthropometry=anthropometry)
     else:
         log.info("patient %s: %s", patient_name, why)
-    with xr.open_dataset(moments_nc) as m, xr.open_dataset(rsm_nc) as r:
+    with open_result(moments_nc) as m, open_result(rsm_nc) as r:
         ds = patient_loads.joint_loads(
             patient, m.load(), r.load(), design, exercises, anthropometry["measures"],
             anthropometry.get("coded_unit_sd", 1.0), prediction_alpha, name=patient_name, direct=direct,

@@ -5,6 +5,9 @@ Every dataset the workflow writes carries the contract's global attributes
 ``package_versions``) plus the CF globals ``Conventions``, ``title``,
 ``source`` and ``history``.  They are set here, once, at the end of a stage
 (xarray drops attrs in most operations, so setting them earlier is wasted).
+
+Reading goes through :func:`open_result`: a truncated or foreign file stops
+the job with one line naming the file, what is wrong and the fix.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import hashlib
 import json
 import os
 import subprocess
+from fnmatch import fnmatch
 from importlib import metadata
 from pathlib import Path
 from typing import Any, Mapping
@@ -23,6 +27,10 @@ import numpy as np
 import xarray as xr
 
 __all__ = [
+    "CorruptInputError",
+    "open_result",
+    "load_joblib",
+    "contract_variables",
     "config_sha256",
     "git_commit",
     "package_versions",
@@ -39,6 +47,67 @@ TRACKED_PACKAGES = (
 )
 
 _REPO_ROOT = Path(__file__).resolve().parents[1]
+
+#: How to recover from a damaged result: every result is a rule's output.
+RECOVER = "delete it and rerun: Snakemake recomputes it"
+
+#: Minimum variables (data or coordinates) per result file, as the data contract lists them; matched on the
+#: end of the path, so a file of the same name elsewhere (a test's, a user's) is not held to it.
+CONTRACT_VARIABLES = {
+    "*doe/ccd.nc": ("marker", "depth", "length", "breadth"),
+    "*doe/scaling.nc": ("scale",),
+    "*musculoskeletal/moments.nc": ("moment_nm",),
+    "*musculoskeletal/rsm.nc": ("coef", "term_p_value", "r2", "adj_r2", "p_value", "selected"),
+    "*patients/*/joint_loads.nc": ("x", "passive_moment_nm", "passive_moment_lo_nm", "passive_moment_hi_nm",
+                                   "active_limit_nm", "in_design_range"),
+    "*actuator/unit_check.nc": ("bending_angle_deg", "bending_moment_nm", "max_penetration_mm", "wall_time_s"),
+    "*actuator/sweep/*/shard*.nc": ("p_top_kpa", "p_bottom_kpa", "bending_angle_deg", "bending_moment_nm", "status",
+                                    "newton_iterations", "wall_time_s", "ray", "ratio", "scale"),
+    "*actuator/response_[23]d.nc": ("p_top_kpa", "p_bottom_kpa", "bending_angle_deg", "bending_moment_nm", "status",
+                                    "converged", "mirrored", "newton_iterations", "wall_time_s"),
+    "*actuator/surrogate_cv.nc": ("r2", "mae", "rmse", "fit_time_s", "predict_time_s"),
+    "*actuator/mapping_2d3d.nc": ("pressure_3d_kpa", "pressure_2d_kpa"),
+    "*patients/*/cascade_plan.nc": ("pressure_kpa", "target_angle_deg", "predicted_angle_deg", "achieved", "reason"),
+    "*benchmarks/speed_accuracy.nc": ("wall_time_s", "error", "pareto"),
+}
+
+
+class CorruptInputError(OSError):
+    """A result file that cannot be read, or is not what this workflow writes; the message is one line."""
+
+
+def corrupt_input(path: str | os.PathLike, what: str) -> CorruptInputError:
+    """The error for ``path``: '<file>: <what is wrong>; delete it and rerun: Snakemake recomputes it'."""
+    return CorruptInputError(f"{path}: {what}; {RECOVER}")
+
+
+def contract_variables(path: str | os.PathLike) -> tuple[str, ...]:
+    """The variables the data contract requires of ``path`` (empty for files it does not list)."""
+    p = Path(path).as_posix()
+    return next((v for pattern, v in CONTRACT_VARIABLES.items() if fnmatch(p, pattern)), ())
+
+
+def open_result(path: str | os.PathLike, required_vars: tuple[str, ...] | None = None) -> xr.Dataset:
+    """A result netCDF file, loaded into memory (closed again), with its variables checked.
+
+    ``required_vars`` defaults to the contract's (:func:`contract_variables`).
+    A file that is truncated, not netCDF, or lacks a required variable raises
+    :class:`CorruptInputError`; a missing file raises FileNotFoundError as usual.
+    """
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such result file")
+    try:
+        ds = xr.load_dataset(path)
+    except Exception as err:  # netCDF4/HDF5 raise OSError, RuntimeError or ValueError for a damaged file
+        detail = str(err).strip().splitlines()[0].split(". ")[0][:160] if str(err).strip() else type(err).__name__
+        raise corrupt_input(path, f"not a readable netCDF file (truncated or not written by this workflow: {detail})") \
+            from err
+    need = contract_variables(path) if required_vars is None else tuple(required_vars)
+    missing = [v for v in need if v not in ds.variables]
+    if missing:
+        raise corrupt_input(path, f"lacks the variable(s) {', '.join(missing)} this workflow writes there "
+                                  "(written by another version, or not by it)")
+    return ds
 
 
 def _jsonable(obj: Any) -> Any:
@@ -209,3 +278,24 @@ def code_files(*modules: str) -> list[str]:
         todo += sorted(_imported_modules(f, dotted) - seen.keys())
     # Relative paths keep the DAG independent of where the clone lives.
     return sorted({os.path.relpath(f) for f in seen.values()})
+
+
+def load_joblib(path: str | os.PathLike) -> Any:
+    """The object in a joblib file this workflow wrote (trusted files only: joblib unpickles).
+
+    A damaged file, or one that needs code this installation lacks, raises
+    :class:`CorruptInputError`; what the object must be is the caller's check.
+    """
+    import warnings
+
+    import joblib
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such result file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # library version warnings: the caller checks the versions it records
+            return joblib.load(path)
+    except Exception as err:  # pickle raises anything from EOFError to ModuleNotFoundError
+        raise corrupt_input(path, f"not a readable joblib file (truncated, or from another version: "
+                                  f"{type(err).__name__}: {str(err).strip()[:120]})") from err

@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 import xarray as xr
+from workflow.provenance import open_result
 
 __all__ = [
     "html_page",
@@ -252,7 +253,7 @@ TABLES = {
 def write_table(name: str, dataset: str | Path, out: str | Path, title_suffix: str = "") -> Path:
     """Table ``name`` of `TABLES` from the netCDF file ``dataset`` to the HTML page ``out``."""
     title, parts, note_attrs = TABLES[name]
-    with xr.open_dataset(dataset) as ds:
+    with open_result(dataset) as ds:
         ds = ds.load()
     notes = [f"{a}: {ds.attrs[a]}" for a in note_attrs if a in ds.attrs]
     notes.append(f"source: {Path(dataset).as_posix()} (git {ds.attrs.get('git_commit', '?')}, "
@@ -266,7 +267,7 @@ def fidelity_choices_table(unit_check: str | Path, cv: str | Path, responses: Se
     rows = []
 
     def attrs(path):
-        with xr.open_dataset(path) as d:
+        with open_result(path) as d:
             return dict(d.attrs)
 
     a = attrs(unit_check)
@@ -277,7 +278,7 @@ def fidelity_choices_table(unit_check: str | Path, cv: str | Path, responses: Se
         a = attrs(p)
         rows.append({"stage": f"sweep {a.get('fea', '?').upper()}", "used": a.get("fidelity", f"h = {a.get('h_mm', '?')} mm"),
                      "why": a.get("fidelity_reason", "")})
-    with xr.open_dataset(cv) as c:
+    with open_result(cv) as c:
         for f in c["fea"].values:
             rows.append({"stage": f"surrogate {str(f).upper()}", "used": str(c["chosen"].sel(fea=f).values),
                          "why": str(c["choice_reason"].sel(fea=f).values) if "choice_reason" in c else c.attrs.get("selection_rule", "")})

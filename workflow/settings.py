@@ -2,16 +2,20 @@
 
 The schema (config/schema.yaml) catches unknown keys, wrong types and
 out-of-range values; :func:`check_config` adds what needs cross references
-(patient measurement codes that have no anthropometry, a missing table file),
-so every mistake is reported before any job starts.
+(patient measurement codes that have no anthropometry or name another finger,
+implausible coded levels, pressure bounds beyond the material limit or the
+sweeps, unstable hyperelastic constants, a missing table file), so every
+mistake is reported before any job starts.
 """
 
 from __future__ import annotations
 
 import copy
+import logging
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
 import yaml
 
 __all__ = ["ConfigError", "check_config", "load_config", "REPO_ROOT", "SCHEMA_PATH"]
@@ -24,8 +28,16 @@ class ConfigError(ValueError):
     """A config value that is well-typed but wrong; the message names the key."""
 
 
-def check_config(config: Mapping[str, Any]) -> None:
-    """Raise :class:`ConfigError` naming the first offending key."""
+log = logging.getLogger(__name__)
+
+
+def check_config(config: Mapping[str, Any]) -> list[str]:
+    """Raise :class:`ConfigError` naming the first offending key; return the warnings.
+
+    Warnings: a patient outside the design region (computed, flagged in its
+    outputs), hyperelastic constants unstable only beyond stretches 0.5-2.
+    """
+    warnings: list[str] = []
     anth = config["anthropometry"]["measures"]
     if "scaling" not in config:
         raise ConfigError("config key 'scaling' is missing (OpenSim scale-factor model per body and axis)")
@@ -35,11 +47,20 @@ def check_config(config: Mapping[str, Any]) -> None:
                 if code not in anth:
                     raise ConfigError(f"scaling.{body}.{axis}.weights.{code}: no anthropometry for {code}")
     for name, patient in config["patients"].items():
+        finger = str(patient.get("finger", "F3"))
         for code, value in patient.get("measurements_mm", {}).items():
+            # Table 2 codes: D/B/L (depth, breadth, length), the finger's digit, the site
+            if code[1:2] != finger[1:]:
+                raise ConfigError(
+                    f"patients.{name}.measurements_mm.{code}: a finger-{code[1:2]} measure, but patients.{name}.finger "
+                    f"is {finger}; give that finger's codes ({code[0]}{finger[1:]}{code[2:]}, ...) or coded levels")
             if code not in anth:
                 raise ConfigError(f"patients.{name}.measurements_mm.{code}: no anthropometry (mean, SD) for this code")
             if not value > 0:
                 raise ConfigError(f"patients.{name}.measurements_mm.{code} = {value}: must be > 0 mm")
+        warnings += _check_coded_levels(name, patient, config["anthropometry"])
+    _check_pressure_bounds(config)
+    warnings += _check_material(config.get("actuator", {}).get("material", {}))
     cascade = config.get("cascade", {})
     for key in ("validation_patient", "dummy_patient"):
         name = cascade.get(key)
@@ -65,6 +86,79 @@ def check_config(config: Mapping[str, Any]) -> None:
                 f"musculoskeletal.table_path = {str(path)!r}: file not found "
                 "(the table backend needs an OpenSim export in the authors' CSV format)"
             )
+    return warnings
+
+
+def _check_coded_levels(name: str, patient: Mapping[str, Any], anthropometry: Mapping[str, Any]) -> list[str]:
+    """Error beyond ``anthropometry.coded_bound``; a warning outside the CCD's design region (sphere and box)."""
+    from workflow import doe
+
+    if "coded" in patient:
+        x = {f: float(patient["coded"][f]) for f in doe.FACTORS}
+        given = f"patients.{name}.coded"
+    else:
+        x = doe.coded_levels(patient["measurements_mm"], anthropometry["measures"],
+                             float(anthropometry.get("coded_unit_sd", 1.0)))
+        given = f"patients.{name}.measurements_mm"
+    levels = ", ".join(f"{f} {v:.3g}" for f, v in x.items())
+    bound = float(anthropometry.get("coded_bound", 3.0))
+    far = [f for f, v in x.items() if not abs(v) <= bound]  # NaN counts as far
+    if far:
+        raise ConfigError(f"{given}: coded levels ({levels}) beyond the plausible bound |x| <= {bound:g} "
+                          f"(anthropometry.coded_bound) in {', '.join(far)}: no finger of Table 2's population")
+    flags = doe.design_region_flags(x)
+    if flags["in_sphere"] and flags["in_box"]:
+        return []
+    return [f"{given}: coded levels ({levels}, ||x|| = {np.linalg.norm(list(x.values())):.3g}) lie outside the "
+            "design region (||x|| <= 1, |x_i| <= 1, Tables 3-4): the response surfaces extrapolate; the outputs "
+            "flag it (in_design_range = False)"]
+
+
+def _check_pressure_bounds(config: Mapping[str, Any]) -> None:
+    """No configured pressure above the material limit; no plan beyond the sweep its surrogate was fitted on."""
+    mat = config.get("actuator", {}).get("material", {})
+    limit = float(mat.get("p_limit_kpa", 300.0))
+    source = mat.get("p_limit_source", "Chung & Venter 2024, Fig. 11: the largest pressure considered")
+    sweep, cascade, stab = config.get("sweep", {}), config.get("cascade", {}), config.get("stability", {})
+    act = config.get("actuator", {})
+    pressures = [(f"sweep.{m}.p_max_kpa", sweep.get(m, {}).get("p_max_kpa")) for m in ("2d", "3d")]
+    pressures += [("cascade.p_max_kpa", cascade.get("p_max_kpa")),
+                  ("stability.rays.p_max_kpa", stab.get("rays", {}).get("p_max_kpa")),
+                  ("stability.locking.p_top_kpa", stab.get("locking", {}).get("p_top_kpa"))]
+    pressures += [(f"actuator.unit_check.p_top_kpa[{i}]", p)
+                  for i, p in enumerate(act.get("unit_check", {}).get("p_top_kpa", []))]
+    pressures += [(f"actuator.moment_check.pairs_kpa[{i}]", max(p))
+                  for i, p in enumerate(act.get("moment_check", {}).get("pairs_kpa", []))]
+    pressures += [(f"fidelity.p_top_kpa[{i}]", p) for i, p in enumerate(config.get("fidelity", {}).get("p_top_kpa", []))]
+    for key, p in pressures:
+        if p is not None and not float(p) <= limit:
+            raise ConfigError(f"{key} = {float(p):g} kPa exceeds actuator.material.p_limit_kpa = {limit:g} kPa "
+                              f"({source}): no chamber may be asked for more than the silicone bears")
+    fea = cascade.get("surrogate", "3d")
+    p_plan, p_sampled = cascade.get("p_max_kpa"), sweep.get(fea, {}).get("p_max_kpa")
+    if p_plan is not None and p_sampled is not None and float(p_plan) > float(p_sampled):
+        raise ConfigError(f"cascade.p_max_kpa = {float(p_plan):g} kPa exceeds sweep.{fea}.p_max_kpa = "
+                          f"{float(p_sampled):g} kPa, the range the cascade.surrogate ({fea}) was sampled on: "
+                          "plans would stand on extrapolated unit responses")
+
+
+def _check_material(material: Mapping[str, Any]) -> list[str]:
+    """mu0 > 0 and Drucker stability of the Table 5 law (:mod:`workflow.material_stability`)."""
+    from workflow.material_stability import drucker_instabilities
+
+    c = {k: float(material.get(k, d)) for k, d in
+         (("c10_mpa", 0.26056762), ("c01_mpa", 0.09754981), ("c20_mpa", 0.05750069))}
+    consts = ", ".join(f"{k} = {v:g}" for k, v in c.items())
+    mu0 = 2.0 * (c["c10_mpa"] + c["c01_mpa"])
+    if not mu0 > 0:
+        raise ConfigError(f"actuator.material: {consts} MPa give the initial shear modulus mu0 = 2 (c10 + c01) = "
+                          f"{mu0:g} MPa <= 0: the Mooney-Rivlin law is unstable at rest (Table 5 has c10 = 0.26057)")
+    found = drucker_instabilities(c["c10_mpa"], c["c01_mpa"], c["c20_mpa"])
+    bad = [str(i) for i in found if i.within]
+    if bad:
+        raise ConfigError(f"actuator.material: {consts} MPa are not Drucker-stable within stretches 0.5-2: "
+                          f"{'; '.join(bad)}")
+    return [f"actuator.material: {consts} MPa: {i} (outside stretches 0.5-2, inside 0.3-3)" for i in found]
 
 
 def load_config(*paths: str | Path, validate: bool = True) -> dict[str, Any]:
@@ -79,7 +173,8 @@ def load_config(*paths: str | Path, validate: bool = True) -> dict[str, Any]:
         from snakemake.utils import validate as sm_validate
 
         sm_validate(config, str(SCHEMA_PATH))
-        check_config(config)
+        for w in check_config(config):
+            log.warning(w)
     return config
 
 

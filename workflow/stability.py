@@ -37,6 +37,7 @@ import numpy as np
 import xarray as xr
 
 from workflow.sweep import STATUS_FLAGS
+from workflow.runlog import solved
 
 __all__ = [
     "STATUS_FLAGS",
@@ -143,7 +144,8 @@ def solve_rays(solve: Callable[..., Any], variants: Sequence[Mapping[str, Any]],
             pen[st != 0] = np.nan
             log.info("%s, P_B/P_T = %.2f: status %d (%s), reached %.0f kPa, %d iterations, %.1f s",
                      method_name("rays", "2d", var["h_mm"], var["contact"], var["formulation"]), r, res.status,
-                     res.reason or "ok", res.load_factor * p_max_kpa, res.newton_iterations, res.wall_time_s)
+                     res.reason or "ok", res.load_factor * p_max_kpa, res.newton_iterations, res.wall_time_s,
+                     extra=solved(res.status != 0))
             for key, val in (("variant", v), ("ratio", float(r)), ("status", st), ("angle", angle), ("pen", pen),
                              ("lam", float(res.load_factor)), ("solver_status", int(res.status)),
                              ("reason", str(res.reason)), ("iters", int(res.newton_iterations)),

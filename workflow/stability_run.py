@@ -17,7 +17,8 @@ import pandas as pd
 import xarray as xr
 
 from workflow import stability as S
-from workflow.provenance import write_dataset
+from workflow.provenance import open_result, write_dataset
+from workflow.runlog import solved
 
 __all__ = ["fe_ray_solver", "write_rays", "write_locking", "write_stability", "summary_table"]
 
@@ -92,7 +93,7 @@ def write_locking(out: str | Path, *, locking_cfg: Mapping[str, Any], actuator: 
             st[f].append(int(r.status))
             wall[f].append(float(r.wall_time_s))
             log.info("%s, K/mu0 = %g: angle %.4f deg per unit, status %d, %.2f s", f, k, r.bending_angle_deg,
-                     r.status, r.wall_time_s)
+                     r.status, r.wall_time_s, extra=solved(r.status != 0))
     ds = S.locking_dataset(ks, ang, st, p_top_kpa=float(c["p_top_kpa"]), h_mm=float(c["h_mm"]), wall_time_s=wall)
     ds.attrs["contact"] = int(bool(c["contact"]))
     log.info("locking ratio (plain / mixed) per K/mu0: %s",
@@ -104,7 +105,7 @@ def write_locking(out: str | Path, *, locking_cfg: Mapping[str, Any], actuator: 
 
 def _sweep_with_mesh(path: str | Path, fea: str, actuator: Mapping[str, Any]) -> xr.Dataset:
     """The sweep with its mesh and contact: its own attrs (the fidelity it was solved with), else the config's."""
-    ds = xr.load_dataset(path)
+    ds = open_result(path)
     mesh = dict(actuator.get("mesh", {}))
     ds.attrs["fea"] = fea
     ds.attrs.setdefault("h_mm", float(mesh.get(f"h_{fea}_mm", 1.0 if fea == "2d" else 2.0)))
@@ -172,24 +173,24 @@ def write_stability(out: str | Path, *, responses: Mapping[str, str | Path], uni
     sources: list[tuple[str, xr.Dataset]] = [("sweep", sweeps[f]) for f in sweeps]
     uc = None
     if unit_check is not None:
-        uc = _unit_check_mesh(xr.load_dataset(unit_check), actuator)
+        uc = _unit_check_mesh(open_result(unit_check), actuator)
         sources.append(("unit_check", uc))
     # the fidelity study's FE cases: every mesh and contact switch to 300 kPa, free and blocked
-    sources += [("fem_case", xr.load_dataset(f)) for f in (fem_cases or ())]
-    rays_ds = xr.load_dataset(rays)
+    sources += [("fem_case", open_result(f)) for f in (fem_cases or ())]
+    rays_ds = open_result(rays)
     sources.append(("rays", rays_ds))
     samples = S.fe_samples(sources)
     counts = S.failure_counts(samples)
     bound = float(stab_cfg["penetration_bound_mm"])
     pen = S.penetration_summary(samples, bound)
-    lock = xr.load_dataset(locking)
+    lock = open_result(locking)
 
     # surrogate coverage and the cascade's queries (its planned pairs)
     regions = {fea: S.SampledRegion.from_response(ds) for fea, ds in sweeps.items()}
     p_max = max(float(ds.attrs.get("p_max_kpa", 300.0)) for ds in sweeps.values())
     grids = [S.coverage_grid(regions[f], p_max, int(stab_cfg["coverage_grid"])).expand_dims(fea=[f]) for f in regions]
     cover = xr.concat(grids, dim="fea")
-    plan_ds = {p: xr.load_dataset(f) for p, f in plans.items()}
+    plan_ds = {p: open_result(f) for p, f in plans.items()}
     q = {k: [] for k in ("patient", "exercise", "group", "pt", "pb", "fea", "in_hull", "near", "trusted")}
     for p, d in plan_ds.items():
         pr = d["pressure_kpa"]
@@ -206,8 +207,8 @@ def write_stability(out: str | Path, *, responses: Mapping[str, str | Path], uni
                                 p, e, g, pt, pb, "outside the sampled region" if not f["in_hull"] else
                                 "nearest a failed sample", cascade_surrogate)
 
-    loads_ds = {p: xr.load_dataset(f) for p, f in loads.items()}
-    with xr.open_dataset(ccd) as c:
+    loads_ds = {p: open_result(f) for p, f in loads.items()}
+    with open_result(ccd) as c:
         design = np.column_stack([c[d].values for d in ("depth", "length", "breadth")])
     dr = S.design_range_table(loads_ds, design)
     feas = S.feasibility_table(plan_ds)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -46,7 +46,7 @@ from sklearn.neighbors import KNeighborsRegressor
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from workflow.provenance import write_dataset
+from workflow.provenance import corrupt_input, load_joblib, open_result, write_dataset
 
 __all__ = [
     "REGRESSORS",
@@ -340,12 +340,21 @@ def save_surrogate(surrogate: Surrogate, path: str | Path) -> Path:
 
 
 def load_surrogate(path: str | Path) -> Surrogate:
-    """Load a surrogate written by `save_surrogate` (trusted files only: joblib unpickles)."""
-    obj = joblib.load(path)
+    """Load a surrogate written by `save_surrogate` (trusted files only: joblib unpickles).
+
+    A damaged file, one that holds no surrogate of this version, or one fitted
+    with another scikit-learn (its models may predict differently) raises
+    `workflow.provenance.CorruptInputError`, naming the file and the fix.
+    """
+    obj = load_joblib(path)
+    s = obj.get("surrogate") if isinstance(obj, dict) else None
+    if not isinstance(s, Surrogate) or any(not hasattr(s, f.name) for f in fields(Surrogate)):
+        raise corrupt_input(path, f"holds {type(s if s is not None else obj).__name__}, not a surrogate "
+                                  "written by this version of the workflow")
     if obj.get("sklearn_version") != sklearn.__version__:
-        warnings.warn(f"{path} was fitted with scikit-learn {obj.get('sklearn_version')}, "
-                      f"running {sklearn.__version__}; refit if predictions look wrong", stacklevel=2)
-    return obj["surrogate"]
+        raise corrupt_input(path, f"fitted with scikit-learn {obj.get('sklearn_version')}, this is "
+                                  f"{sklearn.__version__} (its models may predict differently)")
+    return s
 
 
 def as_callables(surrogate: Surrogate) -> tuple[Callable, Callable]:
@@ -403,7 +412,7 @@ def write_surrogate_cv(response_2d: str | Path, response_3d: str | Path, out: st
                        random_state: int, regressors: Sequence[str], config_slice, rule: str = "surrogate_cv",
                        plot: str | Path | None = None, tolerance: float | None = None) -> xr.Dataset:
     """CV of the regressors on both sweeps -> ``surrogate_cv.nc`` (and the CV chart)."""
-    responses = {fea: xr.load_dataset(p) for fea, p in (("2d", response_2d), ("3d", response_3d))}
+    responses = {fea: open_result(p) for fea, p in (("2d", response_2d), ("3d", response_3d))}
     ds = surrogate_cv(responses, regressors=regressors, k=k, folds=folds, random_state=random_state,
                       tolerance=tolerance)
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
@@ -418,8 +427,8 @@ def write_surrogate_cv(response_2d: str | Path, response_3d: str | Path, out: st
 def write_surrogate(response: str | Path, cv: str | Path, out: str | Path, *, fea: str, k: int, random_state: int,
                     plot: str | Path | None = None) -> Surrogate:
     """Fit the regressor the CV chose for ``fea`` on all its samples; save it (and the Fig. 11-like plot)."""
-    resp = xr.load_dataset(response)
-    with xr.open_dataset(cv) as c:
+    resp = open_result(response)
+    with open_result(cv) as c:
         chosen = str(c["chosen"].sel(fea=fea).values)
         why = str(c["choice_reason"].sel(fea=fea).values) if "choice_reason" in c else ""
     s = fit_surrogate(resp, chosen, fea=fea, k=k, random_state=random_state)

@@ -42,7 +42,8 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 import xarray as xr
 
-from workflow.provenance import write_dataset
+from workflow.provenance import open_result, write_dataset
+from workflow.runlog import solved
 
 __all__ = [
     "STATUS_FLAGS",
@@ -284,7 +285,7 @@ def merge_shards(shards: Iterable[xr.Dataset | str | Path], *, n_ratios: int, n_
     (P_B < P_T).  Failed points are kept, with their status; a mirror inherits
     its twin's status.
     """
-    parts = [xr.load_dataset(s) if isinstance(s, (str, Path)) else s for s in shards]
+    parts = [open_result(s) if isinstance(s, (str, Path)) else s for s in shards]
     if not parts:
         raise ValueError("no shards to merge")
     keys = ["p_top_kpa", "p_bottom_kpa", "bending_angle_deg", "bending_moment_nm", "status",
@@ -405,7 +406,7 @@ def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Seque
             # a 3D ray takes minutes per case: say so as each case ends
             log.info("ray to (%.1f, %.1f) kPa, %s: %s at load factor %.3f, %d steps, %d Newton iterations, %.1f s",
                      p_top, p_bottom, case, r.reason or "converged", r.load_factor, r.steps, r.newton_iterations,
-                     r.wall_time_s)
+                     r.wall_time_s, extra=solved(r.status != 0))
             paths[case] = r
         return samples_from_paths(direction, scales, paths["free"], paths["blocked"])
 
@@ -446,7 +447,7 @@ def write_response(shards: Sequence[str | Path], out: str | Path, *, fea: str, s
              fea, ds.sizes["point"], int(solved.sum()), n_ok, int((~solved).sum()), wall)
     ds.attrs.update({"fea": fea, "p_max_kpa": float(sweep_cfg["p_max_kpa"]), "n_ratios": int(sweep_cfg["n_ratios"]),
                      "n_pressures": int(sweep_cfg["n_pressures"]), "solver_wall_time_s": wall})
-    first = shards[0] if isinstance(shards[0], xr.Dataset) else xr.load_dataset(shards[0])
+    first = shards[0] if isinstance(shards[0], xr.Dataset) else open_result(shards[0])
     # the mesh the shards were solved on, and why
     ds.attrs.update({k: v for k, v in first.attrs.items() if k in ("h_mm", "contact") or k.startswith("fidelity")})
     write_dataset(ds, out, rule=rule, config_slice=config_slice,

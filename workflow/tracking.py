@@ -22,9 +22,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
-import xarray as xr
 
-from .provenance import config_sha256, git_commit, package_versions
+from .provenance import config_sha256, git_commit, open_result, package_versions
 
 __all__ = ["headline_metrics", "rule_times", "flatten", "log_run", "compare_runs", "main"]
 
@@ -45,13 +44,13 @@ def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 def _scaling_metrics(results: Path, patient: str) -> dict[str, float]:
     p = results / "validation" / "scaling.nc"
-    with xr.open_dataset(p) as ds:
+    with open_result(p) as ds:
         return {"scaling_max_abs_error": float(ds.attrs["max_abs_error_excluding_paper_inconsistency"])}
 
 
 def _rsm_metrics(results: Path, patient: str) -> dict[str, float]:
     out: dict[str, float] = {}
-    with xr.open_dataset(results / "musculoskeletal" / "rsm.nc") as ds:
+    with open_result(results / "musculoskeletal" / "rsm.nc") as ds:
         sel = ds["r2"].where(ds["selected"]).max("form")
         for finger in sorted({str(r).split("_")[0] for r in ds["response"].values}):
             names = [r for r in ds["response"].values if str(r).startswith(finger)]
@@ -62,7 +61,7 @@ def _rsm_metrics(results: Path, patient: str) -> dict[str, float]:
 
 def _joint_load_metrics(results: Path, patient: str) -> dict[str, float]:
     out: dict[str, float] = {}
-    with xr.open_dataset(results / "patients" / patient / "joint_loads.nc") as ds:
+    with open_result(results / "patients" / patient / "joint_loads.nc") as ds:
         for j in ds["joint"].values:
             out[f"active_limit_{j}_nm"] = float(ds["active_limit_nm"].sel(joint=j))
             out[f"passive_max_{j}_nm"] = float(ds["passive_moment_nm"].sel(joint=j).max())
@@ -73,13 +72,13 @@ def _joint_load_metrics(results: Path, patient: str) -> dict[str, float]:
 
 
 def _cascade_metrics(results: Path, patient: str) -> dict[str, float]:
-    with xr.open_dataset(results / "patients" / patient / "cascade_plan.nc") as ds:
+    with open_result(results / "patients" / patient / "cascade_plan.nc") as ds:
         return {"exercises_achieved": float(np.asarray(ds["achieved"].values, bool).sum())}
 
 
 def _surrogate_metrics(results: Path, patient: str) -> dict[str, float]:
     out: dict[str, float] = {}
-    with xr.open_dataset(results / "actuator" / "surrogate_cv.nc") as ds:
+    with open_result(results / "actuator" / "surrogate_cv.nc") as ds:
         mean = ds[["r2", "rmse"]].mean("fold")
         for fea in ds["fea"].values:
             for tgt in ds["target"].values:
@@ -91,7 +90,7 @@ def _surrogate_metrics(results: Path, patient: str) -> dict[str, float]:
 
 def _fea_check_metrics(results: Path, patient: str) -> dict[str, float]:
     out: dict[str, float] = {}
-    with xr.open_dataset(results / "patients" / patient / "fea_check.nc") as ds:
+    with open_result(results / "patients" / patient / "fea_check.nc") as ds:
         out["fea_check_reached"] = float(np.asarray(ds["achieved"].values, bool).sum())
         if "achieved_corrected" in ds:
             out["fea_check_reached_corrected"] = float(np.asarray(ds["achieved_corrected"].values, bool).sum())
@@ -104,7 +103,7 @@ def _fea_check_metrics(results: Path, patient: str) -> dict[str, float]:
 
 def _fidelity_metrics(results: Path, patient: str) -> dict[str, float]:
     out: dict[str, float] = {}
-    with xr.open_dataset(results / "fidelity" / "fem.nc") as ds:
+    with open_result(results / "fidelity" / "fem.nc") as ds:
         for m in ds["model_choice"].values:
             out[f"fidelity_fem_{m}_h_mm"] = float(ds["chosen_h_mm"].sel(model_choice=m))
             case = str(ds["chosen_case"].sel(model_choice=m).values)

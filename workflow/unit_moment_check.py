@@ -34,6 +34,7 @@ import xarray as xr
 
 from workflow import fem
 from workflow.unit_model import UnitModel, fit_shape
+from workflow.runlog import solved
 
 __all__ = ["DEFAULT_CHECK", "lookup", "model_moment_nm", "run_fea", "compare", "moment_check", "plot_moment_check",
            "write_moment_check"]
@@ -121,7 +122,8 @@ def run_fea(actuator: Mapping, pairs_kpa, fractions, end_holds=("backbone", "fac
     for i, (pt, pb) in enumerate(pairs):
         free, t = _solve(actuator, dim, mesh, pt, pb, "free")
         out["free_status"][i] = free.status
-        log.info("P = (%g, %g) kPa: free angle %.3f deg/unit, status %d, %.1f s", pt, pb, free.bending_angle_deg, free.status, t)
+        log.info("P = (%g, %g) kPa: free angle %.3f deg/unit, status %d, %.1f s", pt, pb, free.bending_angle_deg, free.status, t,
+                 extra=solved(free.status != 0))
         if free.status:
             continue
         total = free.bending_angle_total_deg
@@ -131,7 +133,8 @@ def run_fea(actuator: Mapping, pairs_kpa, fractions, end_holds=("backbone", "fac
             blk, t = _solve(actuator, dim, mesh, pt, pb, "blocked", end_hold=hold)
             out["blocked_status"][h, i] = blk.status
             out["blocked_moment_nm"][h, i] = blk.bending_moment_nm if blk.status == 0 else np.nan
-            log.info("  %s: blocked moment %.5f N m, status %d, %.1f s", hold, blk.bending_moment_nm, blk.status, t)
+            log.info("  %s: blocked moment %.5f N m, status %d, %.1f s", hold, blk.bending_moment_nm, blk.status, t,
+                     extra=solved(blk.status != 0))
             for j, f in enumerate(fr):
                 rot, t = _solve(actuator, dim, mesh, pt, pb, "rotation", end_hold=hold, end_angle_deg=f * total)
                 out["status"][h, i, j] = rot.status
@@ -140,7 +143,7 @@ def run_fea(actuator: Mapping, pairs_kpa, fractions, end_holds=("backbone", "fac
                     out["moment_fea_nm"][h, i, j] = rot.bending_moment_nm
                     out["backbone_angle_deg"][h, i, j] = rot.bending_angle_deg
                 log.info("    theta = %.2f theta_f: M = %.5f N m, status %d (%s), %.1f s", f, rot.bending_moment_nm,
-                         rot.status, rot.reason, t)
+                         rot.status, rot.reason, t, extra=solved(rot.status != 0))
     return out
 
 

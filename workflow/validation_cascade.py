@@ -169,10 +169,10 @@ def write_cascade_validation(plan_nc: str | Path, tables: Mapping[str, str | Pat
     unit-moment targets, compared when given; ``dummy_plan_nc``: the PLA
     dummy finger's plan, compared with ``table10`` (the paper's experiment).
     """
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
-    plan = xr.load_dataset(plan_nc)
-    plans = {"table10": xr.load_dataset(dummy_plan_nc)} if dummy_plan_nc and "table10" in tables else None
+    plan = open_result(plan_nc)
+    plans = {"table10": open_result(dummy_plan_nc)} if dummy_plan_nc and "table10" in tables else None
     ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa, plans)
     if table07 is not None:
         ds = ds.merge(compare_unit_moments(plan, table07))

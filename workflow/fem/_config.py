@@ -12,6 +12,7 @@ import xarray as xr
 from ._mesh import build_unit_mesh
 from ._solve import STATUS_FLAGS
 from ._unit import DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
+from ..runlog import solved
 
 __all__ = ["layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check", "write_unit_check", "write_deformed_vtu"]
 
@@ -84,7 +85,7 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
                     break
                 log.info("%s %s: attempt %d stopped at %.1f kPa (%s)", model, case, attempt + 1, res.load_factor * pmax, res.reason)
             log.info("%s %s to P_T=%g kPa: status %d (%s), %d iterations, %.1f s", model, case, pmax, res.status,
-                     res.reason, res.newton_iterations, res.wall_time_s)
+                     res.reason, res.newton_iterations, res.wall_time_s, extra=solved(res.status != 0))
             for j, p in enumerate(p_top_kpa):
                 hit = [h for h in res.history if abs(h["p_top_kpa"] - p) < 1e-6 * pmax]
                 if not hit:  # the ray failed before this pressure

@@ -52,6 +52,7 @@ import numpy as np
 import xarray as xr
 
 from workflow.musculoskeletal import opensim_model as om
+from ..runlog import solved
 
 __all__ = [
     "angle_grid",
@@ -389,7 +390,9 @@ def scale_factors_of_run(scaling: xr.Dataset, run: int) -> dict[str, tuple[float
 # --- Path-level entry points of the Snakemake rules -------------------------------------------
 
 def _scaling_table(scaling_nc: str | Path) -> xr.Dataset:
-    with xr.open_dataset(scaling_nc) as s:
+    from workflow.provenance import open_result
+
+    with open_result(scaling_nc) as s:
         return s.load()
 
 
@@ -442,7 +445,8 @@ def write_run(
     config_slice = {"config": config_slice, "reference_model_sha256": _sha256(model_path)}
     n_fail = int((ds["status"] == 1).sum())
     log.info("run %s (%s): %d samples in %.2f s, %d failed equilibria", run, marker,
-             int((ds["status"] == 0).sum()), float(ds["wall_time_s"]), n_fail)
+             int((ds["status"] == 0).sum()), float(ds["wall_time_s"]), n_fail,
+             extra=solved(n_fail, n=int((ds["status"] == 0).sum()) + n_fail))
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
                   title=f"OpenSim finger moments, CCD run {run} ({marker})",
                   source="finger-rehab-workflow generated OpenSim finger model (opensim backend)")
@@ -457,11 +461,11 @@ def _sha256(path: str | Path) -> str:
 
 def write_merged(run_files: Sequence[str | Path], out: str | Path, *, rule: str, config_slice: Any) -> xr.Dataset:
     """Rule ``opensim_merge``: the per-run files -> ``moments_opensim.nc`` (``moments.nc`` layout)."""
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
     parts = []
     for f in run_files:
-        with xr.open_dataset(f) as d:
+        with open_result(f) as d:
             parts.append(d.load())
     ds = merge_runs(parts)
     # Encodings read from the per-run files (e.g. a 2-character string width for

@@ -217,11 +217,11 @@ def write_validation(
     When the reference export is absent the dataset has an empty ``response``
     dimension and the attribute ``reference_missing = 1``, and the plot says so.
     """
-    from workflow.provenance import write_dataset
+    from workflow.provenance import open_result, write_dataset
 
-    with xr.open_dataset(moments_nc) as m:
+    with open_result(moments_nc) as m:
         ours = m.load()
-    with xr.open_dataset(ccd_nc) as c:
+    with open_result(ccd_nc) as c:
         design = pd.DataFrame({d: c[d].values for d in DIMENSIONS}, index=c["run"].values)
     ref = read_reference(reference_csv)
     if ref is None:

@@ -1,10 +1,11 @@
-import xarray as xr
 
 from workflow.cascade import write_cascade_plan
+from workflow.pressure_limit import material_limit
 from workflow.scripts._common import setup_logging
 from workflow.stability import SampledRegion
 from workflow.surrogates import load_surrogate
 from workflow.unit_model import UnitModel
+from workflow.provenance import open_result
 
 setup_logging(snakemake)  # noqa: F821
 p = snakemake.params  # noqa: F821
@@ -14,9 +15,9 @@ unit = UnitModel.from_surrogate(surrogate, **p.unit_model)
 # which surrogate the plan stands on, and why (fidelity.auto or the CV rule)
 notes = {"fidelity": f"{surrogate.fea} {surrogate.regressor}", "fidelity_reason": surrogate.meta.get("fidelity_reason", "")}
 # the sweep the surrogate was fitted on: planned pressures outside its converged samples are flagged
-region = SampledRegion.from_response(xr.load_dataset(i.response)) if "response" in i.keys() else None
+region = SampledRegion.from_response(open_result(i.response)) if "response" in i.keys() else None
 write_cascade_plan(snakemake.wildcards.patient, p.patient, unit, ccd_nc=i.ccd, moments_nc=i.moments,  # noqa: F821
                    joint_loads_nc=i.joint_loads, out_nc=snakemake.output.plan,  # noqa: F821
                    out_png=snakemake.output.plot, cascade_cfg=p.cascade,  # noqa: F821
                    anthropometry=p.anthropometry, config_slice=p.config_slice, rule=snakemake.rule,  # noqa: F821
-                   sampled_region=region, notes=notes)
+                   sampled_region=region, notes=notes, material_limit=material_limit(p.pressure_limit))

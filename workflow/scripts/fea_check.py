@@ -1,15 +1,15 @@
-import xarray as xr
 
 from workflow.fea_check import write_fea_check
 from workflow.fidelity import check_choice
 from workflow.scripts._common import setup_logging
+from workflow.provenance import open_result
 
 log = setup_logging(snakemake)  # noqa: F821
 p = snakemake.params  # noqa: F821
 i = snakemake.input  # noqa: F821
 o = snakemake.output  # noqa: F821
 # fidelity.auto: the coarsest mesh whose angles the check study found within the tolerance
-study = xr.load_dataset(i.check_study) if "check_study" in i.keys() else None
+study = open_result(i.check_study) if "check_study" in i.keys() else None
 h, why = check_choice(study, p.tolerance_deg, p.fea_check["h_actuator_mm"], p.fea_check["penetration_bound_mm"])
 log.info("FEA check mesh: h = %g mm: %s", h, why)
 fea_cfg = dict(p.fea_check, h_actuator_mm=h, h_finger_mm=h) if study is not None else p.fea_check

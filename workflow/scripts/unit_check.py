@@ -1,14 +1,14 @@
-import xarray as xr
 
 from workflow import fem
 from workflow.fidelity import apply_fem_choice
 from workflow.scripts._common import setup_logging
+from workflow.provenance import open_result
 
 setup_logging(snakemake)  # noqa: F821
 p = snakemake.params  # noqa: F821
 i = snakemake.input  # noqa: F821
 # fidelity.auto: each model on the mesh the FE study chose, else the config's
-choice = xr.load_dataset(i.fidelity) if "fidelity" in i.keys() else None
+choice = open_result(i.fidelity) if "fidelity" in i.keys() else None
 per_model, attrs = {}, {}
 for m in p.actuator.get("unit_check", {}).get("models", ["2d", "3d"]):
     per_model[m], f = apply_fem_choice(p.actuator, choice, m)
