@@ -93,3 +93,54 @@ def test_unit_with_contact_passes_the_former_stall_at_half_mm():
     res = fem.solve_unit({"dim": 2, "h": 0.5}, 120.0, 0.0, "free", True)
     assert res.status == 0, res.reason
     assert res.max_penetration_mm < 0.02
+
+
+#: The stated penetration bound of the unit's penalty contact (config stability.penetration_bound_mm): 5 % of the gap.
+PENETRATION_BOUND_MM = 0.05
+
+
+def test_pockets_stay_open_at_300kpa_2d():
+    """P_T = 300 kPa, P_B = 0: the squeezed bottom pockets' walls meet but do not cross.
+
+    The global check (no search radius) finds no boundary node inside foreign material beyond the penalty's
+    bound, and the smallest pocket keeps a positive area; with contact across the gaps only (the former model)
+    the same check sees the walls pass through each other.
+    """
+    um = fem.build_unit_mesh(h=1.0, dim=2)
+    res = fem.solve_unit(um, 300.0, 0.0, "free", True)
+    assert res.status == 0, res.reason
+    assert max(h["overlap_depth_mm"] for h in res.history) <= PENETRATION_BOUND_MM
+    assert res.max_penetration_mm <= PENETRATION_BOUND_MM
+    assert min(h["min_pocket_area_mm2"] for h in res.history) > 0.1 * 36.4
+    gaps_only = fem.build_unit_mesh(h=1.0, dim=2)
+    gaps_only.contact_surfaces = [s for s in gaps_only.contact_surfaces if s.startswith("gap_")]
+    old = fem.solve_unit(gaps_only, 300.0, 0.0, "free", True, keep_displacement=True)
+    x = gaps_only.mesh.p + old.displacement.reshape(-1, 2).T
+    depth, n_inside = fem.overlap_depth(x, gaps_only.mesh.t)
+    assert depth > 10 * PENETRATION_BOUND_MM and n_inside > 0
+    assert min(h["min_pocket_area_mm2"] for h in old.history) < 0.1 * 36.4
+
+
+@pytest.mark.slow
+def test_pockets_stay_open_at_300kpa_3d():
+    um = fem.build_unit_mesh(h=2.0, dim=3)
+    res = fem.solve_unit(um, 300.0, 0.0, "free", True)
+    assert res.status == 0, res.reason
+    assert max(h["overlap_depth_mm"] for h in res.history) <= PENETRATION_BOUND_MM
+    assert res.max_penetration_mm <= PENETRATION_BOUND_MM
+    assert min(h["min_pocket_volume_mm3"] for h in res.history) > 0.1 * 509.6
+
+
+def test_overlap_check_sees_a_node_pushed_through_a_wall():
+    # a 2x1 block of two cells: move a corner node of the left cell deep into the right cell
+    mesh, _, _ = fem.build_grid_mesh([np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0])])
+    x = mesh.p.copy()
+    assert fem.overlap_depth(x, mesh.t) == (0.0, 0)
+    corner = int(np.flatnonzero((x[0] == 0.0) & (x[1] == 1.0))[0])
+    x[:, corner] = [1.5, 0.6]  # inside the right cell, 0.4 mm below its top face
+    depth, n = fem.overlap_depth(x, mesh.t)
+    assert n == 1 and depth == pytest.approx(0.4)
+    # pocket area: a unit square hole's walls oriented clockwise (outward normals of the solid point into it)
+    sq = np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0]]).T
+    walls = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+    assert fem.pocket_sizes(sq, [walls])[0] == pytest.approx(1.0)

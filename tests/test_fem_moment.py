@@ -1,14 +1,18 @@
-"""Unit FEA under a prescribed end rotation (case "rotation") and the unit model against it (issue 5 item 4).
+"""The unit under an end moment: case "rotation", the end hold in use, and the check against a chain.
 
-Coarse 2D unit (h = 2 mm, contact on) at P_T = 60 kPa: seconds per solve.
+Coarse 2D meshes (h = 2 mm, contact on) at P_T = 60 kPa: seconds per solve.
 """
+
+import inspect
 
 import numpy as np
 import pytest
+import yaml
 
 from workflow import fem
+from workflow.settings import REPO_ROOT
 from workflow.unit_model import UnitModel
-from workflow.unit_moment_check import compare, lookup, model_moment_nm
+from workflow.unit_moment_check import compare, lookup, model_moment_nm, moment_check, unit_rotations_deg
 
 P_T, P_B = 60.0, 0.0
 
@@ -16,29 +20,6 @@ P_T, P_B = 60.0, 0.0
 @pytest.fixture(scope="module")
 def mesh():
     return fem.build_unit_mesh(None, h=2.0, dim=2)
-
-
-@pytest.fixture(scope="module")
-def ends(mesh):
-    """Free angle (total, deg) and the blocked moments of both end holds (N m)."""
-    free = fem.solve_unit(mesh, P_T, P_B, "free")
-    assert free.converged
-    blocked = {hold: fem.solve_unit(mesh, P_T, P_B, "blocked", end_hold=hold) for hold in fem.END_HOLDS}
-    assert all(b.converged for b in blocked.values())
-    return free.bending_angle_total_deg, {h: b.bending_moment_nm for h, b in blocked.items()}
-
-
-@pytest.fixture(scope="module")
-def curve(mesh, ends):
-    """Backbone-held moment at end inclinations -0.1, 0.5, 1.0 of the free angle."""
-    theta_f, _ = ends
-    out = {}
-    for f in (-0.1, 0.5, 1.0):
-        r = fem.solve_unit(mesh, P_T, P_B, "rotation", end_angle_deg=f * theta_f, end_hold="backbone")
-        assert r.converged, r.reason
-        assert r.end_angle_deg == pytest.approx(f * theta_f, abs=1e-9)
-        out[f] = r.bending_moment_nm
-    return out
 
 
 def test_clamp_rotation_is_rigid(mesh):
@@ -52,28 +33,53 @@ def test_clamp_rotation_is_rigid(mesh):
 
 
 @pytest.mark.parametrize("hold", fem.END_HOLDS)
-def test_rotation_at_zero_is_the_blocked_case(mesh, ends, hold):
+def test_rotation_at_zero_is_the_blocked_case(mesh, hold):
+    b = fem.solve_unit(mesh, P_T, P_B, "blocked", end_hold=hold)
     r = fem.solve_unit(mesh, P_T, P_B, "rotation", end_angle_deg=0.0, end_hold=hold)
-    assert r.bending_moment_nm == pytest.approx(ends[1][hold], rel=1e-9)
+    assert b.converged and r.converged
+    assert r.bending_moment_nm == pytest.approx(b.bending_moment_nm, rel=1e-9)
 
 
-def test_backbone_hold_moment_vanishes_at_the_free_angle(ends, curve):
-    assert abs(curve[1.0]) < 0.05 * ends[1]["backbone"]
+def test_one_end_hold_everywhere():
+    """The blocked moment has one definition: the default of every function, the config and the schema."""
+    cfg = yaml.safe_load((REPO_ROOT / "config" / "config.yaml").read_text())["actuator"]
+    schema = yaml.safe_load((REPO_ROOT / "config" / "schema.yaml").read_text())["properties"]["actuator"]
+    assert cfg["end_hold"] == schema["properties"]["end_hold"]["default"] == fem.DEFAULT_END_HOLD == "face"
+    for fn in (fem.solve_unit, fem.unit_model, fem.held_end_nodes):
+        assert inspect.signature(fn).parameters["end_hold"].default == fem.DEFAULT_END_HOLD
+    um = fem.build_unit_mesh(None, h=2.0, dim=2)
+    assert np.array_equal(fem.held_end_nodes(um), um.nodes["end"])
 
 
-def test_moment_decreases_with_inclination(ends, curve):
-    m = [curve[-0.1], ends[1]["backbone"], curve[0.5], curve[1.0]]
-    assert np.all(np.diff(m) < 0)
+def test_unit_rotations_add_up_to_the_backbone_turn():
+    um = fem.build_unit_mesh({"n_chambers": 3}, h=2.0, dim=2)
+    assert np.allclose(unit_rotations_deg(um, np.zeros(um.mesh.p.size)), 0.0)
+    r = fem.solve_unit(um, P_T, P_B, "free", keep_displacement=True)
+    rot = unit_rotations_deg(um, r.displacement)
+    assert rot.shape == (3,) and np.all(rot > 0)
+    # the units tile the backbone: their sum is the turn from its first to its last element
+    x = um.mesh.p + r.displacement.reshape(-1, 2).T
+    paper = np.flatnonzero(np.abs(um.mesh.p[1]) <= 0.1 + 1e-9)
+    cols = np.unique(np.round(um.mesh.p[0, paper], 6))
+
+    def direction(k):
+        a = paper[np.isclose(um.mesh.p[0, paper], cols[k])]
+        b = paper[np.isclose(um.mesh.p[0, paper], cols[k + 1])]
+        d = x[:, b].mean(axis=1) - x[:, a].mean(axis=1)
+        return -np.degrees(np.arctan2(d[1], d[0]))
+
+    assert rot.sum() == pytest.approx(direction(len(cols) - 2) - direction(0), rel=1e-9)
 
 
-def test_unit_model_agrees_with_the_fea_at_half_the_free_angle(ends, curve):
-    """The linear spring built on the same free/blocked runs: within 10 % of M_b (measured: a few %)."""
-    theta_f, mb = ends
-    model = UnitModel(lookup([P_T], [P_B], [theta_f / 3]), lookup([P_T], [P_B], [mb["backbone"]]), theta_scale_deg=30.0)
-    m = model_moment_nm(model, P_T, P_B, 0.5 * theta_f / 3)
-    assert abs(m - curve[0.5]) < 0.10 * mb["backbone"]
-    # and the model's angle under that FEA moment, per unit
-    assert model.angle_deg(P_T, P_B, curve[0.5]) == pytest.approx(0.5 * theta_f / 3, abs=0.1 * theta_f / 3)
+def test_chain_check_favours_the_default_hold():
+    """Middle unit of a chain of five (coarse) under end moments: the face hold's spring has its stiffness."""
+    act = {"mesh": {"h_2d_mm": 2.0}}
+    ds = moment_check(act, {"pairs_kpa": [[P_T, P_B]], "fractions": [0.0, 0.5], "chain_units": 5})
+    assert ds.attrs["best_end_hold"] == fem.DEFAULT_END_HOLD
+    assert abs(np.log(float(ds["compliance_ratio"].sel(end_hold="face")[0]))) < 0.25
+    assert float(ds["compliance_ratio"].sel(end_hold="backbone")[0]) > 1.5
+    for name in ("chain_moment_nm", "chain_mid_angle_deg", "angle_error_deg", "compliance_ratio"):
+        assert "units" in ds[name].attrs and "long_name" in ds[name].attrs
 
 
 @pytest.mark.parametrize("c", [0.0, 0.5, -0.5])
@@ -85,22 +91,17 @@ def test_model_moment_inverts_the_unit_model(c):
     assert m[1] == pytest.approx(0.05) and m[4] == pytest.approx(0.0, abs=1e-12)
 
 
-def test_compare_dataset():
-    """The check's dataset from synthetic FEA arrays: dims, errors, status and the perfect-spring case."""
-    pairs, fr = [[100.0, 0.0], [0.0, 100.0]], [0.5, 1.0]
-    thf = np.array([10.0, -10.0])
-    mb = np.array([[0.05, -0.05]])
-    end = thf[:, None] * np.array(fr)[None]
-    fea = {"free_angle_deg": thf, "free_status": np.zeros(2, np.int32), "blocked_moment_nm": mb,
-           "blocked_status": np.zeros((1, 2), np.int32), "end_angle_deg": end,
-           "moment_fea_nm": mb[:, :, None] * (1 - np.array(fr))[None, None], "backbone_angle_deg": end[None],
-           "status": np.zeros((1, 2, 2), np.int32), "wall_time_s": np.ones((1, 2, 2))}
-    fea["status"][0, 1, 1] = 1
-    ds = compare(fea, pairs, fr, ["backbone"])
-    assert ds["moment_fea_nm"].dims == ("end_hold", "point", "fraction")
-    np.testing.assert_allclose(ds["moment_error_nm"].values[0, 0], 0.0, atol=1e-12)
-    assert np.isnan(ds["moment_error_nm"].values[0, 1, 1])
-    assert ds.attrs["max_abs_rel_error_backbone"] == pytest.approx(0.0, abs=1e-12)
-    assert ds.attrs["failed_rotations_backbone"] == 1
-    for name in ("moment_fea_nm", "moment_model_nm", "moment_error_rel", "status"):
-        assert "units" in ds[name].attrs and "long_name" in ds[name].attrs
+def test_compare_picks_the_hold_with_the_chain_stiffness():
+    """Synthetic arrays: a chain whose middle unit follows the 'face' spring exactly."""
+    fr = [0.0, 0.5]
+    thf = np.array([10.0])
+    mb = np.array([[0.05], [0.02]])  # face, backbone
+    M = np.array([[0.0, 0.05, 0.025]])
+    fea = {"free_angle_deg": thf, "free_status": np.zeros(1, np.int32), "blocked_moment_nm": mb,
+           "blocked_status": np.zeros((2, 1), np.int32), "blocked_load_factor": np.ones((2, 1)),
+           "chain_free_deg": thf, "chain_moment_nm": M, "chain_mid_angle_deg": thf[0] * (1 - M / 0.05),
+           "chain_status": np.zeros((1, 3), np.int32), "wall_time_s": np.ones(1)}
+    ds = compare(fea, [[100.0, 0.0]], fr, ["face", "backbone"])
+    assert ds.attrs["best_end_hold"] == "face"
+    np.testing.assert_allclose(ds["angle_error_deg"].sel(end_hold="face").values, 0.0, atol=1e-12)
+    assert float(ds["compliance_ratio"].sel(end_hold="backbone")[0]) == pytest.approx(2.5)

@@ -74,7 +74,7 @@ def test_rays_dataset_from_a_fake_solver():
     assert ds["formulation"].values.tolist() == ["mixed", "mixed", "displacement"]
     assert np.allclose(ds["p_bottom_kpa"].values[1], [75, 150, 225, 300])
     counts = S.failure_counts(S.fe_samples([("rays", ds)]))
-    assert int(counts.sel(fe_method=S.method_name("rays", "2d", 2.0, True), status_code=0)) == 6
+    assert int(counts.sel(fe_method=S.method_name("rays", "2d", 2.0, True, "mixed"), status_code=0)) == 6
     with pytest.raises(ValueError, match="formulation"):
         S.solve_rays(solve, [{"h_mm": 1, "contact": True, "formulation": "hybrid", "ratios": [0]}], p_max_kpa=1,
                      n_pressures=1)
@@ -82,28 +82,30 @@ def test_rays_dataset_from_a_fake_solver():
 
 # -- 2. Locking --------------------------------------------------------------
 def test_plain_q1_locks_at_high_bulk_modulus_while_mixed_does_not():
-    fem = pytest.importorskip("workflow.fem")
+    from workflow import fem
+
     mesh = fem.build_unit_mesh(None, h=2.0, dim=2)
     ang = {}
-    for mixed in (True, False):
+    for f in S.LOCKING_FORMULATIONS:
         for k in (10.0, 1.0e4):
-            r = fem.solve_unit(mesh, 60.0, 0.0, "free", False, material={"bulk_ratio": k},
-                               formulation="mixed" if mixed else "displacement")
+            r = fem.solve_unit(mesh, 1.0, 0.0, "free", False, material={"bulk_ratio": k}, formulation=f)
             assert r.status == 0
-            ang[mixed, k] = r.bending_angle_deg
-    assert ang[True, 1e4] / ang[True, 10.0] > 0.9  # mean-dilatation: nearly incompressible costs little
-    assert abs(ang[False, 1e4] / ang[True, 1e4]) < 0.05  # plain Q1: the bending is locked away
-    ds = S.locking_dataset([10.0, 1e4], {"mixed": [ang[True, 10.0], ang[True, 1e4]],
-                                         "displacement": [ang[False, 10.0], ang[False, 1e4]]},
-                           {"mixed": [0, 0], "displacement": [0, 0]}, p_top_kpa=60.0, h_mm=2.0)
+            ang[f, k] = r.bending_angle_deg
+    assert ang["mixed", 1e4] / ang["mixed", 10.0] > 0.9  # mean-dilatation: nearly incompressible costs little
+    assert abs(ang["displacement", 1e4] / ang["mixed", 1e4]) < 0.05  # plain Q1: the bending is locked away
+    ds = S.locking_dataset([10.0, 1e4], {f: [ang[f, 10.0], ang[f, 1e4]] for f in S.LOCKING_FORMULATIONS},
+                           {f: [0, 0] for f in S.LOCKING_FORMULATIONS}, p_top_kpa=1.0, h_mm=2.0)
     assert float(ds["locking_ratio"].sel(bulk_ratio=1e4)) < 0.05
+    # the plain Q1 paper layer one element thick shear-locks: the enhanced one bends far more at small load
+    assert float(ds["shear_locking_ratio"].sel(bulk_ratio=1e4)) < 0.7
 
 
 def test_locking_ratio_ignores_failed_solves():
-    ds = S.locking_dataset([10, 100], {"mixed": [5.0, 4.0], "displacement": [4.0, 1.0]},
-                           {"mixed": [0, 1], "displacement": [0, 0]}, p_top_kpa=60.0, h_mm=2.0)
+    ds = S.locking_dataset([10, 100], {"enhanced_paper": [6.0, 5.0], "mixed": [5.0, 4.0], "displacement": [4.0, 1.0]},
+                           {"enhanced_paper": [0, 0], "mixed": [0, 1], "displacement": [0, 0]}, p_top_kpa=60.0, h_mm=2.0)
     assert ds["locking_ratio"].values[0] == pytest.approx(0.8)
     assert np.isnan(ds["locking_ratio"].values[1])
+    assert ds["shear_locking_ratio"].values[0] == pytest.approx(5.0 / 6.0)
 
 
 # -- 3. Penetration ----------------------------------------------------------
@@ -213,8 +215,9 @@ def test_write_stability_end_to_end(tmp_path):
                 "variants": [{"h_mm": 2.0, "contact": True, "formulation": "mixed", "ratios": [0.0, 0.5]}]}
     R.write_rays(tmp_path / "rays.nc", rays_cfg=rays_cfg, actuator={}, config_slice={}, solve=solve)
 
-    def lock_solve(k, mixed):
-        return SimpleNamespace(status=0, bending_angle_deg=5.0 if mixed else 5.0 / (1 + k / 50), wall_time_s=0.01)
+    def lock_solve(k, formulation):
+        angle = 5.0 / (1 + k / 50) if formulation == "displacement" else 5.0
+        return SimpleNamespace(status=0, bending_angle_deg=angle, wall_time_s=0.01)
 
     R.write_locking(tmp_path / "locking.nc", locking_cfg={"h_mm": 2.0, "p_top_kpa": 60.0, "contact": False,
                                                           "bulk_ratios": [10, 1e4]},

@@ -280,3 +280,17 @@ def test_samples_from_paths_exact_interpolated_and_failed():
     ds = sweep.run_shard(lambda d, s: sweep.samples_from_paths(d, s, free, blocked_failed), shard=0, n_shards=1,
                          p_max_kpa=300.0, n_ratios=2, n_pressures=10)
     assert int((ds["status"] == 0).sum()) == 10
+
+
+def test_samples_carry_the_overlap_checks_up_to_each_sample():
+    from workflow.sweep import samples_from_paths
+
+    hist = [{"lam": s, "iterations": 3, "bending_angle_deg": 10 * s, "bending_moment_nm": 0.1 * s,
+             "max_penetration_mm": pen, "overlap_depth_mm": ov, "min_pocket_area_mm2": area}
+            for s, pen, ov, area in ((0.5, 0.01, 0.0, 30.0), (0.75, 0.03, 0.2, 20.0), (1.0, 0.02, 0.0, 25.0))]
+    out = samples_from_paths((300.0, 0.0), np.array([0.5, 1.0]), {"status": 0, "history": hist},
+                             {"status": 0, "history": hist})
+    np.testing.assert_allclose(out["max_penetration_mm"], [0.01, 0.03])
+    np.testing.assert_allclose(out["overlap_depth_mm"], [0.0, 0.2])  # the worst state so far, not the last
+    np.testing.assert_allclose(out["min_pocket_area_mm2"], [30.0, 20.0])
+    assert "min_pocket_volume_mm3" not in out

@@ -43,6 +43,8 @@ __all__ = [
     "fem_cases",
     "unit_quantities",
     "relative_errors",
+    "Richardson",
+    "richardson",
     "pareto_front",
     "speed_accuracy_dataset",
     "Choice",
@@ -63,6 +65,56 @@ def unit_quantities(angle_deg: Sequence[float], moment_nm: Sequence[float], p_to
         out[f"angle_{int(round(p))}"] = float(a)
         out[f"moment_{int(round(p))}"] = float(m)
     return out
+
+
+@dataclass(frozen=True)
+class Richardson:
+    """Extrapolation from three meshes: limit, observed order, grid convergence index of the finest.
+
+    ``asymptotic`` is False when the three values do not converge monotonically
+    (oscillating or diverging differences) or the order falls outside
+    [0.5, 6]: the limit is then the finest value and the GCI NaN.
+    """
+
+    limit: float
+    order: float
+    gci_fine: float
+    asymptotic: bool
+
+
+def richardson(h: Sequence[float], f: Sequence[float], fs: float = 1.25) -> Richardson:
+    """Generalised Richardson extrapolation (Celik et al. 2008, J. Fluids Eng. 130, 078001).
+
+    ``h``: three element sizes (any order), ``f``: the values on them.  With
+    h1 < h2 < h3, r21 = h2/h1, r32 = h3/h2, e21 = f2 - f1, e32 = f3 - f2 and
+    s = sign(e32/e21), the observed order p solves
+    p = |ln|e32/e21| + ln((r21^p - s)/(r32^p - s))| / ln r21 (fixed point); then
+    f_ext = (r21^p f1 - f2)/(r21^p - 1) and GCI_fine = fs |e21/f1| / (r21^p - 1).
+    """
+    order = np.argsort(np.asarray(h, float))
+    (h1, h2, h3), (f1, f2, f3) = np.asarray(h, float)[order], np.asarray(f, float)[order]
+    if not np.all(np.isfinite([f1, f2, f3])):
+        return Richardson(np.nan, np.nan, np.nan, False)
+    e21, e32 = f2 - f1, f3 - f2
+    if e21 == 0.0:
+        return Richardson(float(f1), np.inf, 0.0, True)
+    r21, r32 = h2 / h1, h3 / h2
+    ratio = e32 / e21
+    s = np.sign(ratio)
+    if s <= 0:  # oscillating: no observed order
+        return Richardson(float(f1), np.nan, np.nan, False)
+    p = abs(np.log(abs(ratio))) / np.log(r21)
+    for _ in range(100):
+        q = np.log((r21**p - s) / (r32**p - s))
+        p_new = abs(np.log(abs(ratio)) + q) / np.log(r21)
+        if abs(p_new - p) < 1e-12:
+            p = p_new
+            break
+        p = p_new
+    if not (0.5 <= p <= 6.0):
+        return Richardson(float(f1), float(p), np.nan, False)
+    rp = r21**p
+    return Richardson(float((rp * f1 - f2) / (rp - 1.0)), float(p), float(fs * abs(e21 / f1) / (rp - 1.0)), True)
 
 
 def relative_errors(values: np.ndarray, reference: np.ndarray) -> np.ndarray:

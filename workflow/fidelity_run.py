@@ -39,12 +39,15 @@ log = logging.getLogger(__name__)
 # FE unit: one case, the table, the choice
 # --------------------------------------------------------------------------
 def fem_table(cases: Sequence[xr.Dataset]) -> xr.Dataset:
-    """The cases on one table (case, quantity) with errors against each model's finest converged case.
+    """The cases on one table (case, quantity) with errors against each model's converged value.
 
-    Reference per model and quantity: the finest mesh *with contact* that
-    reached that point (contact is part of the physics; cases without it are
-    compared with it).  ``error`` = relative error; NaN where the case did
-    not reach the point or is itself the only one that did.
+    Reference per model and quantity: the generalised Richardson extrapolation
+    (`workflow.fidelity.richardson`) from the three finest meshes *with
+    contact* that reached that point, when they converge monotonically with an
+    observed order in [0.5, 6]; otherwise the finest of them (contact is part
+    of the physics; cases without it are compared with it).  ``error`` =
+    relative error; NaN where the case did not reach the point or, without an
+    extrapolation, is finer than the reference.
     """
     names = [str(c.attrs["case"]) for c in cases]
     parsed = [FD.FemCase.parse(n) for n in names]
@@ -54,28 +57,38 @@ def fem_table(cases: Sequence[xr.Dataset]) -> xr.Dataset:
         vals[i] = [q[k] for k in FD.UNIT_QUANTITIES]
     err = np.full_like(vals, np.nan)
     ref_name = np.full(vals.shape, "", dtype=object)
+    ref_val, order, gci = np.full(vals.shape, np.nan), np.full(vals.shape, np.nan), np.full(vals.shape, np.nan)
     for model in sorted({c.model for c in parsed}):
         rows = [i for i, c in enumerate(parsed) if c.model == model]
         for j in range(vals.shape[1]):
-            cands = [i for i in rows if parsed[i].contact and np.isfinite(vals[i, j])]
+            cands = sorted([i for i in rows if parsed[i].contact and np.isfinite(vals[i, j])], key=lambda i: parsed[i].h_mm)
             if not cands:
                 continue
-            r = min(cands, key=lambda i: parsed[i].h_mm)
+            r = cands[0]
+            rich = FD.richardson([parsed[i].h_mm for i in cands[:3]], vals[cands[:3], j]) if len(cands) >= 3 else None
+            extrapolated = rich is not None and rich.asymptotic
+            ref = rich.limit if extrapolated else vals[r, j]
+            label = ("richardson(" + ", ".join(f"{parsed[i].h_mm:g}" for i in cands[:3]) + " mm)") if extrapolated else names[r]
             for i in rows:
-                ref_name[i, j] = names[r]
-                if i == r:
+                ref_name[i, j], ref_val[i, j] = label, ref
+                if rich is not None:
+                    order[i, j], gci[i, j] = rich.order, rich.gci_fine
+                if i == r and not extrapolated:
                     err[i, j] = 0.0
-                elif parsed[i].contact and parsed[i].h_mm <= parsed[r].h_mm:
+                elif not extrapolated and parsed[i].contact and parsed[i].h_mm <= parsed[r].h_mm:
                     continue  # a finer case the reference could not be compared with
                 else:
-                    err[i, j] = FD.relative_errors(vals[i, j], vals[r, j])
+                    err[i, j] = FD.relative_errors(vals[i, j], ref)
     wall = np.array([float(c["case_wall_time_s"]) for c in cases])
     conv = np.array([bool(np.all(c["status"].values == 0)) for c in cases])
     return xr.Dataset(
         {
             "value": (("case", "quantity"), vals, {"units": "deg or N m", "long_name": "free angle per unit (angle_*) / blocked moment per unit (moment_*), P_B = 0"}),
             "error": (("case", "quantity"), err, {"units": "1", "long_name": "relative error against the model's finest converged case with contact"}),
-            "reference_case": (("case", "quantity"), ref_name, {"units": "1", "long_name": "case taken as the reference"}),
+            "reference_case": (("case", "quantity"), ref_name, {"units": "1", "long_name": "reference: Richardson extrapolation from three meshes, or the finest case"}),
+            "reference_value": (("case", "quantity"), ref_val, {"units": "deg or N m", "long_name": "reference value of the model and quantity"}),
+            "observed_order": (("case", "quantity"), order, {"units": "1", "long_name": "observed order of convergence of the three finest meshes with contact"}),
+            "gci_fine": (("case", "quantity"), gci, {"units": "1", "long_name": "grid convergence index of the finest mesh (Celik et al. 2008, safety factor 1.25)"}),
             "wall_time_s": ("case", wall, {"units": "s", "long_name": "wall time of the case (free and blocked rays)"}),
             "converged": ("case", conv, {"units": "1", "long_name": "every study point reached in both rays"}),
             "model": ("case", np.array([c.model for c in parsed], dtype=object), {"units": "1", "long_name": "2d or 3d"}),
@@ -105,7 +118,8 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
         sel = _model_cases(table, model)
         names = [str(n) for n in sel["case"].values]
         worst = (sel["error"] / bound).max("quantity", skipna=True).values
-        conv = sel["converged"].values.astype(bool)
+        # contact is part of the physics: cases without it are comparisons, never a choice
+        conv = sel["converged"].values.astype(bool) & sel["contact"].values.astype(bool)
         ch = FD.cheapest_within(f"fem_{model}", names, sel["wall_time_s"].values, worst, 1.0, converged=conv,
                                 unit="x the tolerance")
         case = FD.FemCase.parse(ch.method)

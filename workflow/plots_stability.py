@@ -77,10 +77,10 @@ def plot_failures(ds: xr.Dataset, out) -> None:
 
 
 def plot_locking(ds: xr.Dataset, out) -> None:
-    """Free angle per unit against K/mu0 for both formulations, and their ratio."""
+    """Free angle per unit against K/mu0 per formulation, and the locking ratios."""
     k = ds["bulk_ratio"].values
     fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.6))
-    for f, mk in zip(ds["formulation"].values, ("o-", "s--")):
+    for f, mk in zip(ds["formulation"].values, ("o-", "s--", "^:", "d-.")):
         a.plot(k, ds["locking_angle_deg"].sel(formulation=f).values, mk, label=str(f))
     a.set_xscale("log")
     a.set_xlabel("K / mu0")
@@ -90,12 +90,16 @@ def plot_locking(ds: xr.Dataset, out) -> None:
     a.set_title(f"2D unit, h = {ds.attrs['locking_h_mm']:g} mm, P_T = {ds.attrs['locking_p_top_kpa']:g} kPa, "
                 "no contact", fontsize=9)
     r = ds["locking_ratio"].values
-    b.semilogx(k, r, "o-", color="tab:red")
+    b.semilogx(k, r, "o-", color="tab:red", label="volumetric: plain Q1 / mean dilatation")
+    if "locking_shear_ratio" in ds:
+        b.semilogx(k, ds["locking_shear_ratio"].values, "s--", color="tab:blue",
+                   label="shear: plain Q1 paper / enhanced paper")
     b.axhline(1, color="0.6", lw=0.8, ls=":")
     b.set_xlabel("K / mu0")
-    b.set_ylabel("plain Q1 angle / mean-dilatation angle")
+    b.set_ylabel("angle ratio")
     b.set_ylim(min(-0.05, float(np.nanmin(r)) - 0.05), 1.1)
-    b.set_title("locking ratio (1 = no locking)", fontsize=9)
+    b.legend(fontsize=7)
+    b.set_title("locking ratios (1 = no locking)", fontsize=9)
     fig.tight_layout()
     _save(fig, out)
 

@@ -63,12 +63,16 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Element formulations: mean-dilatation Q1/P0 (``mixed=True`` in workflow.fem) and plain Q1.
-FORMULATIONS = ("mixed", "displacement")
+#: Element formulations of workflow.fem (``FORMULATIONS`` there): the default enhanced-strain paper layer on
+#: mean-dilatation silicone, the silicone enhanced too, mean dilatation only and plain Q1.
+FORMULATIONS = ("enhanced_paper", "enhanced", "mixed", "displacement")
+#: The locking study's: shear locking of the paper layer (mixed vs enhanced_paper) and volumetric
+#: locking of the silicone (displacement vs mixed).
+LOCKING_FORMULATIONS = ("enhanced_paper", "mixed", "displacement")
 
 
-def method_name(source: str, fea: str, h_mm: float, contact: bool, formulation: str = "mixed") -> str:
-    """Label of one FE method, e.g. ``sweep 2D h=1 mm, contact, mixed``."""
+def method_name(source: str, fea: str, h_mm: float, contact: bool, formulation: str = "enhanced_paper") -> str:
+    """Label of one FE method, e.g. ``sweep 2D h=1 mm, contact, enhanced_paper``."""
     return f"{source} {fea.upper()} h={h_mm:g} mm, {'contact' if contact else 'no contact'}, {formulation}"
 
 
@@ -130,8 +134,8 @@ def solve_rays(solve: Callable[..., Any], variants: Sequence[Mapping[str, Any]],
     path up to it (contact events between samples count).
     """
     scales = np.arange(1, n_pressures + 1) / n_pressures
-    rows: dict[str, list] = {k: [] for k in ("variant", "ratio", "status", "angle", "pen", "lam", "solver_status",
-                                             "reason", "iters", "wall")}
+    rows: dict[str, list] = {k: [] for k in ("variant", "ratio", "status", "angle", "pen", "overlap", "pocket", "lam",
+                                             "solver_status", "reason", "iters", "wall")}
     for v, var in enumerate(variants):
         if var["formulation"] not in FORMULATIONS:
             raise ValueError(f"unknown formulation {var['formulation']!r}: expected one of {FORMULATIONS}")
@@ -140,13 +144,16 @@ def solve_rays(solve: Callable[..., Any], variants: Sequence[Mapping[str, Any]],
             st = ray_statuses(scales, float(res.load_factor), int(res.status))
             angle = _history_at(res.history, scales, "bending_angle_deg")
             pen = _running_max_at(res.history, scales, "max_penetration_mm")
-            angle[st != 0] = np.nan
-            pen[st != 0] = np.nan
+            overlap = _running_max_at(res.history, scales, "overlap_depth_mm")
+            pocket = -_running_max_at([dict(h, m=-h.get("min_pocket_area_mm2", np.nan)) for h in res.history], scales, "m")
+            for arr in (angle, pen, overlap, pocket):
+                arr[st != 0] = np.nan
             log.info("%s, P_B/P_T = %.2f: status %d (%s), reached %.0f kPa, %d iterations, %.1f s",
                      method_name("rays", "2d", var["h_mm"], var["contact"], var["formulation"]), r, res.status,
                      res.reason or "ok", res.load_factor * p_max_kpa, res.newton_iterations, res.wall_time_s,
                      extra=solved(res.status != 0))
             for key, val in (("variant", v), ("ratio", float(r)), ("status", st), ("angle", angle), ("pen", pen),
+                             ("overlap", overlap), ("pocket", pocket),
                              ("lam", float(res.load_factor)), ("solver_status", int(res.status)),
                              ("reason", str(res.reason)), ("iters", int(res.newton_iterations)),
                              ("wall", float(res.wall_time_s))):
@@ -172,7 +179,11 @@ def rays_dataset(rays: Mapping[str, np.ndarray], variants: Sequence[Mapping[str,
             "bending_angle_deg": (("ray", "scale"), np.asarray(rays["angle"], float).reshape(ratio.size, scale.size),
                                   {"units": "degree", "long_name": "free bending angle per unit"}),
             "max_penetration_mm": (("ray", "scale"), np.asarray(rays["pen"], float).reshape(ratio.size, scale.size),
-                                   {"units": "mm", "long_name": "largest contact penetration over the load path up to the sample (0 without contact)"}),
+                                   {"units": "mm", "long_name": "largest penetration over the load path up to the sample (contact or overlap check)"}),
+            "overlap_depth_mm": (("ray", "scale"), np.asarray(rays["overlap"], float).reshape(ratio.size, scale.size),
+                                 {"units": "mm", "long_name": "deepest boundary node inside another element up to the sample"}),
+            "min_pocket_area_mm2": (("ray", "scale"), np.asarray(rays["pocket"], float).reshape(ratio.size, scale.size),
+                                    {"units": "mm2", "long_name": "smallest pocket area up to the sample (36.4 at rest)"}),
             "last_converged_scale": ("ray", np.asarray(rays["lam"], float),
                                      {"units": "1", "long_name": "last converged load factor of the ray"}),
             "solver_status": ("ray", np.asarray(rays["solver_status"], np.int32),
@@ -322,12 +333,12 @@ def locking_dataset(bulk_ratios: Sequence[float], angle_deg: Mapping[str, Sequen
                     wall_time_s: Mapping[str, Sequence[float]] | None = None) -> xr.Dataset:
     """Free angle per unit (deg) on ``formulation`` x ``bulk_ratio`` (K/mu0), with the locking ratio.
 
-    ``angle_deg`` / ``status`` map each of `FORMULATIONS` to one value per
-    bulk ratio (status: workflow.fem's, 0 = converged; the angle of a failed
-    solve is NaN).
+    ``angle_deg`` / ``status`` map each of `LOCKING_FORMULATIONS` to one value
+    per bulk ratio (status: workflow.fem's, 0 = converged; the angle of a
+    failed solve is NaN).
     """
     k = np.asarray(bulk_ratios, float)
-    forms = list(FORMULATIONS)
+    forms = list(LOCKING_FORMULATIONS)
     ang = np.array([np.asarray(angle_deg[f], float) for f in forms])
     st = np.array([np.asarray(status[f], np.int32) for f in forms])
     ang = np.where(st == 0, ang, np.nan)
@@ -342,6 +353,10 @@ def locking_dataset(bulk_ratios: Sequence[float], angle_deg: Mapping[str, Sequen
     ds = xr.Dataset(data, coords={"formulation": forms,
                                   "bulk_ratio": ("bulk_ratio", k, {"units": "1", "long_name": "K / mu0"})})
     ds["locking_ratio"] = locking_ratio(ds)
+    ds["shear_locking_ratio"] = (ds["bending_angle_deg"].sel(formulation="mixed")
+                                 / ds["bending_angle_deg"].sel(formulation="enhanced_paper")).drop_vars(
+        "formulation", errors="ignore").assign_attrs(
+        units="1", long_name="plain Q1 paper layer / enhanced-strain paper layer free angle (1 = no shear locking)")
     ds.attrs.update({"p_top_kpa": float(p_top_kpa), "p_bottom_kpa": 0.0, "h_mm": float(h_mm), "contact": 0})
     return ds
 

@@ -65,9 +65,9 @@ def write_rays(out: str | Path, *, rays_cfg: Mapping[str, Any], actuator: Mappin
 
 def write_locking(out: str | Path, *, locking_cfg: Mapping[str, Any], actuator: Mapping[str, Any], config_slice: Any,
                   rule: str = "stability_locking", solve=None) -> xr.Dataset:
-    """Free angle vs K/mu0, mixed and plain displacement elements -> ``locking.nc``.
+    """Free angle vs K/mu0 per element formulation (``stability.LOCKING_FORMULATIONS``) -> ``locking.nc``.
 
-    ``solve(bulk_ratio, mixed)`` defaults to workflow.fem's 2D unit at
+    ``solve(bulk_ratio, formulation)`` defaults to workflow.fem's 2D unit at
     ``locking_cfg`` (``h_mm``, ``p_top_kpa``, ``contact``); it returns a result
     with ``status``, ``bending_angle_deg`` and ``wall_time_s``.
     """
@@ -77,18 +77,18 @@ def write_locking(out: str | Path, *, locking_cfg: Mapping[str, Any], actuator: 
 
         mesh = fem.build_unit_mesh(actuator.get("geometry"), h=float(c["h_mm"]), dim=2)
 
-        def solve(k, mixed):
+        def solve(k, formulation):
             mat = dict(actuator.get("material", {}), bulk_ratio=float(k))
             return fem.solve_unit(mesh, float(c["p_top_kpa"]), 0.0, "free", bool(c["contact"]), material=mat,
-                                  solver=actuator.get("solver"), mixed=mixed)
+                                  solver=actuator.get("solver"), formulation=formulation)
 
     ks = [float(k) for k in c["bulk_ratios"]]
-    ang: dict[str, list] = {f: [] for f in S.FORMULATIONS}
-    st: dict[str, list] = {f: [] for f in S.FORMULATIONS}
-    wall: dict[str, list] = {f: [] for f in S.FORMULATIONS}
-    for f in S.FORMULATIONS:
+    ang: dict[str, list] = {f: [] for f in S.LOCKING_FORMULATIONS}
+    st: dict[str, list] = {f: [] for f in S.LOCKING_FORMULATIONS}
+    wall: dict[str, list] = {f: [] for f in S.LOCKING_FORMULATIONS}
+    for f in S.LOCKING_FORMULATIONS:
         for k in ks:
-            r = solve(k, f == "mixed")
+            r = solve(k, f)
             ang[f].append(float(r.bending_angle_deg))
             st[f].append(int(r.status))
             wall[f].append(float(r.wall_time_s))
@@ -96,10 +96,11 @@ def write_locking(out: str | Path, *, locking_cfg: Mapping[str, Any], actuator: 
                      r.status, r.wall_time_s, extra=solved(r.status != 0))
     ds = S.locking_dataset(ks, ang, st, p_top_kpa=float(c["p_top_kpa"]), h_mm=float(c["h_mm"]), wall_time_s=wall)
     ds.attrs["contact"] = int(bool(c["contact"]))
-    log.info("locking ratio (plain / mixed) per K/mu0: %s",
-             {k: round(float(r), 4) for k, r in zip(ks, ds["locking_ratio"].values)})
+    log.info("volumetric locking ratio (plain Q1 / mean dilatation) per K/mu0: %s; shear locking ratio (plain / "
+             "enhanced paper layer): %s", {k: round(float(r), 4) for k, r in zip(ks, ds["locking_ratio"].values)},
+             {k: round(float(r), 4) for k, r in zip(ks, ds["shear_locking_ratio"].values)})
     write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title="Volumetric locking: free angle vs K/mu0, mean-dilatation and plain Q1 elements")
+                  title="Locking: free angle vs K/mu0, enhanced-strain paper layer, mean-dilatation and plain Q1 elements")
     return ds
 
 
@@ -143,9 +144,12 @@ def summary_table(ds: xr.Dataset) -> pd.DataFrame:
             text += f"; largest penetration {pen:.4f} mm ({'above' if pen > bound else 'within'} the {bound:g} mm bound)"
         rows.append(("Newton failures, penetration", str(m), text))
     for k, r in zip(ds["bulk_ratio"].values, ds["locking_ratio"].values):
-        a = ds["locking_angle_deg"].sel(bulk_ratio=k).values
+        a = {str(f): float(ds["locking_angle_deg"].sel(bulk_ratio=k, formulation=f)) for f in ds["formulation"].values}
         rows.append(("locking", f"K/mu0 = {k:g}",
-                     f"free angle mixed {a[0]:.3f} deg, plain Q1 {a[1]:.3f} deg: ratio {r:.4f}"))
+                     "free angle " + ", ".join(f"{f} {v:.3f} deg" for f, v in a.items())
+                     + f": volumetric ratio {r:.4f}"
+                     + (f", shear ratio {float(ds['locking_shear_ratio'].sel(bulk_ratio=k)):.4f}"
+                        if "locking_shear_ratio" in ds else "")))
     for fea in ds["fea"].values:
         on = ds["query_fea"].values == fea
         bad = int(np.count_nonzero(~ds["query_trusted"].values[on]))
@@ -222,6 +226,7 @@ def write_stability(out: str | Path, *, responses: Mapping[str, str | Path], uni
         counts.rename("failure_count").to_dataset(),
         pen.rename({"max_penetration_mm": "max_penetration_by_method"}),
         lock.rename({"status": "locking_status", "bending_angle_deg": "locking_angle_deg",
+                     "shear_locking_ratio": "locking_shear_ratio",
                      **({"wall_time_s": "locking_wall_time_s"} if "wall_time_s" in lock else {})}).drop_attrs(),
         cover.rename({k: f"coverage_{k}" for k in ("in_range", "in_hull", "near_failure", "trusted")}),
         dr, feas,

@@ -81,7 +81,16 @@ SAMPLE_FIELDS = (
     "wall_time_s",
 )
 
+#: Per-sample checks of the deformed unit (``workflow.fem.overlap_measures``), over the load path up to the
+#: sample, both cases; NaN when the solver does not report them.  The pocket size is an area in 2D and a
+#: volume in 3D, so a sweep carries one of the last two.
+CHECK_FIELDS = ("max_penetration_mm", "overlap_depth_mm", "min_pocket_area_mm2", "min_pocket_volume_mm3")
+
 _VAR_ATTRS = {
+    "max_penetration_mm": {"units": "mm", "long_name": "largest penetration up to the sample (contact pairs or the overlap check)"},
+    "overlap_depth_mm": {"units": "mm", "long_name": "deepest boundary node inside another element up to the sample (0: none)"},
+    "min_pocket_area_mm2": {"units": "mm2", "long_name": "smallest pocket area of the unit up to the sample (2D; 36.4 at rest)"},
+    "min_pocket_volume_mm3": {"units": "mm3", "long_name": "smallest pocket volume of the unit up to the sample (3D; 509.6 at rest)"},
     "bending_angle_deg": {
         "units": "degree",
         "long_name": "free bending angle per unit (backbone end rotation / 3), positive towards the palm",
@@ -154,6 +163,9 @@ def _as_samples(result: Any, n: int) -> dict[str, np.ndarray]:
         fields = {k: np.asarray(result[k]) for k in SAMPLE_FIELDS}
     else:
         fields = dict(zip(SAMPLE_FIELDS, (np.asarray(v) for v in result), strict=True))
+    for k in CHECK_FIELDS:
+        if isinstance(result, Mapping) and k in result:
+            fields[k] = np.asarray(result[k], float)
     for k, v in fields.items():
         if v.shape != (n,):
             raise ValueError(f"solver returned {k} with shape {v.shape}, expected ({n},)")
@@ -235,7 +247,8 @@ def run_shard(
         if n_bad:
             logger.warning("shard %d: ray %d has %d of %d samples not converged", shard, j, n_bad, scales.size)
 
-    cat = {k: np.concatenate([b[k] for b in blocks]) if blocks else np.array([]) for k in blocks[0]}
+    keys = list(dict.fromkeys(k for b in blocks for k in b))  # a failed ray has no checks: NaN there
+    cat = {k: np.concatenate([b.get(k, np.full(b["status"].size, np.nan)) for b in blocks]) for k in keys}
     return _points_dataset(cat, mirrored=np.zeros(total, dtype=bool), source=np.full(total, -1))
 
 
@@ -255,6 +268,7 @@ def _points_dataset(d: Mapping[str, np.ndarray], *, mirrored: np.ndarray, source
             "ratio": ("point", np.asarray(d["ratio"], dtype=float)),
             "scale": ("point", np.asarray(d["scale"], dtype=float)),
             "source_point": ("point", np.asarray(source, dtype=np.int32)),
+            **{k: ("point", np.asarray(d[k], dtype=float)) for k in CHECK_FIELDS if k in d},
         },
         coords={
             "point": np.arange(n, dtype=np.int32),
@@ -263,7 +277,8 @@ def _points_dataset(d: Mapping[str, np.ndarray], *, mirrored: np.ndarray, source
         },
     )
     for name, attrs in _VAR_ATTRS.items():
-        ds[name].attrs.update(attrs)
+        if name in ds:
+            ds[name].attrs.update(attrs)
     ds["status"].attrs.update(
         {
             "long_name": "solver status of the sample",
@@ -290,6 +305,7 @@ def merge_shards(shards: Iterable[xr.Dataset | str | Path], *, n_ratios: int, n_
         raise ValueError("no shards to merge")
     keys = ["p_top_kpa", "p_bottom_kpa", "bending_angle_deg", "bending_moment_nm", "status",
             "newton_iterations", "wall_time_s", "ray", "ratio", "scale"]
+    keys += [k for k in CHECK_FIELDS if all(k in p for p in parts)]  # a twin's checks hold for its mirror too
     d = {k: np.concatenate([p[k].values for p in parts]) for k in keys}
     rays, counts = np.unique(d["ray"], return_counts=True)
     if not np.array_equal(rays, np.arange(n_ratios)) or np.any(counts != n_pressures):
@@ -361,6 +377,16 @@ def samples_from_paths(direction: Sequence[float], scales: np.ndarray, free: Any
         out_vals[key] = v
     if n_interp:
         log.warning("ray %s: %d sample values interpolated between load steps", tuple(direction), n_interp)
+    checks = {}
+    for key, worst in (("max_penetration_mm", np.max), ("overlap_depth_mm", np.max), ("min_pocket_area_mm2", np.min),
+                       ("min_pocket_volume_mm3", np.min)):
+        rec = [(float(h["lam"]), float(h[key])) for case in (free, blocked) for h in (_get(case, "history", []) or [])
+               if key in h]
+        if not rec:
+            continue
+        lam_k, val_k = np.array(rec).T
+        checks[key] = np.array([worst(val_k[lam_k <= s + lam_tol]) if np.any(lam_k <= s + lam_tol) else np.nan
+                                for s in scales])
     status = np.zeros(scales.size, dtype=int)
     not_reached = np.flatnonzero(~reached)
     if not_reached.size:
@@ -378,6 +404,7 @@ def samples_from_paths(direction: Sequence[float], scales: np.ndarray, free: Any
         "status": status,
         "newton_iterations": iters.astype(int),
         "wall_time_s": wall * share,
+        **checks,
     }
 
 

@@ -1,25 +1,28 @@
-"""A unit under an external end moment: direct FEA against `workflow.unit_model` (issue 5 item 4).
+"""The unit under an external end moment, checked against a unit inside a longer chain.
 
-CLARIFICATIONS 6: free bending (M = 0) and blocked (angle 0) are the two ends
-of a unit's moment-angle curve; FEA runs at prescribed end rotations check the
-model between them.  Per pressure pair P = (P_T, P_B) this runs the unit FEA
-(`workflow.fem`, case ``free``, ``blocked`` and ``rotation``) and compares the
-couple M_fea(theta) needed to hold the end at theta = fraction * theta_f(P)
-with the unit model's moment at that angle, the model being built on the free
-angle and blocked moment of *the same FEA runs* (so the model is tested, not
-a surrogate).
+Free bending (M = 0) and blocked (angle 0) are the two ends of a unit's
+moment-angle curve; `workflow.unit_model` joins them with a torsional spring
+theta(M) = theta_f - M theta_f / M_b.  Which blocked moment M_b belongs in it
+depends on how the three-chamber unit model's free end is held at zero
+rotation (``end_hold``, `workflow.fem.held_end_nodes`): ``face`` holds the whole
+end face plane (the blocks' end walls with the backbone), ``backbone`` only
+the paper and base layers.
 
-End holds (``end_holds``, see `workflow.fem.held_end_nodes`): ``face`` holds
-the whole end face plane (the sweeps' blocked moment), ``backbone`` only its
-paper and base layers.  Measured on the 2D unit (h = 1 mm, contact): with
-``face`` the couple collapses once the last bottom block, forced to turn with
-the face, is pressed into its neighbour (M < 0 from about 0.1-0.25 theta_f,
-and the solve stalls beyond about 20 deg total), so a torsional spring cannot
-represent it; with ``backbone`` the curve runs from M_b to about 0 at
-theta_f and the linear spring is within about 11 % of M_b.
+The reference is what the reduced-order model stands for: one unit inside a
+longer actuator.  A chain of ``chain_units`` chambers (default 5), cut at gap
+centres so that its ends are the backbone alone (`build_unit_mesh(...,
+end_gaps=True)`), is solved free and with its end held at prescribed
+rotations (fractions of its own free angle, 0 = blocked); in each state the
+end couple M is the moment every unit of the chain carries, and the middle
+unit's rotation theta_mid (backbone angle between the centres of its two gaps)
+is its response.  Per hold the spring built on the three-chamber unit's free
+angle and that hold's blocked moment predicts theta_mid(M); the hold whose
+compliance theta_f / M_b matches the chain's (the least-squares slope of
+theta_mid against M) best, and whose predictions are closest, is the one the
+workflow uses (``actuator.end_hold``).
 
-Units: angles in degrees per unit (chamber; the FEA's total / n_chambers),
-moments in N m per unit for the full actuator width, pressures in kPa.
+Units: angles in degrees per unit (chamber), moments in N m per unit for the
+full actuator width, pressures in kPa.
 """
 
 from __future__ import annotations
@@ -33,23 +36,24 @@ import numpy as np
 import xarray as xr
 
 from workflow import fem
-from workflow.unit_model import UnitModel, fit_shape
-from workflow.runlog import solved
+from workflow.fem._actuator import backbone_curve
+from workflow.unit_model import UnitModel
 
-__all__ = ["DEFAULT_CHECK", "lookup", "model_moment_nm", "run_fea", "compare", "moment_check", "plot_moment_check",
-           "write_moment_check"]
+__all__ = ["DEFAULT_CHECK", "lookup", "model_moment_nm", "unit_rotations_deg", "run_fea", "compare", "moment_check",
+           "plot_moment_check", "write_moment_check"]
 
 log = logging.getLogger(__name__)
 
-#: Points of the check (config ``actuator.moment_check``); about 2.5 min of CPU for 2D at h = 1 mm.
+#: Points of the check (config ``actuator.moment_check``).
 DEFAULT_CHECK = {
     "model": "2d",
-    "pairs_kpa": [[180.0, 0.0], [300.0, 0.0], [300.0, 150.0]],
-    "fractions": [0.25, 0.5, 1.0],  # end inclination / free angle
-    "end_holds": ["backbone", "face"],
+    "pairs_kpa": [[60.0, 0.0], [180.0, 0.0], [300.0, 150.0]],
+    "fractions": [0.0, 0.25, 0.5, 0.75],  # chain end inclination / its free angle (0 = blocked)
+    "end_holds": ["face", "backbone"],
+    "chain_units": 5,
 }
 
-#: Status of a rotation point that was not run because its free or blocked run failed.
+#: Status of a point that was not run because the free run it depends on failed.
 NOT_RUN = 4
 
 
@@ -91,199 +95,205 @@ def model_moment_nm(model: UnitModel, pt_kpa, pb_kpa, angle_deg) -> np.ndarray:
     return k * u
 
 
+def unit_rotations_deg(um, u: np.ndarray) -> np.ndarray:
+    """Backbone rotation of each unit (deg, positive = P_T sense) between the centres of its gaps.
+
+    The first and last units run from the chain's ends.  ``u``: nodal
+    displacements (mm) of the mesh ``um``.
+    """
+    p = um.mesh.p
+    dim = um.dim
+    x = p + np.asarray(u)[: p.size].reshape(-1, dim).T
+    g = um.geometry
+    paper = np.flatnonzero(np.abs(p[1]) <= 0.5 * g["paper_width"] + 1e-9)
+    cur, ref = backbone_curve(x, p, paper), backbone_curve(p, p, paper)
+    seg = -np.degrees(np.arctan2(np.diff(cur[:, 1]), np.diff(cur[:, 0])))
+    mid = 0.5 * (ref[1:, 0] + ref[:-1, 0])
+    pitch = g["depth"] + g["gap"]
+    n = int(g["n_chambers"])
+    stations = np.concatenate([[mid[0]], pitch * np.arange(1, n) - 0.5 * g["gap"], [mid[-1]]])
+    return np.diff(np.interp(stations, mid, seg))
+
+
 def _solve(actuator, dim, mesh, pt, pb, case, **kw):
-    """One unit solve with the config's settings; returns (result, wall time s)."""
+    """One solve with the config's settings; returns (result, wall time s)."""
     t0 = time.perf_counter()
     res = fem.solve_unit_from_config(actuator, dim, pt, pb, case, mesh=mesh, **kw)
     return res, time.perf_counter() - t0
 
 
-def run_fea(actuator: Mapping, pairs_kpa, fractions, end_holds=("backbone", "face"), dim: int = 2) -> dict:
-    """FEA free angle, blocked moments and moments at prescribed end rotations.
+def run_fea(actuator: Mapping, pairs_kpa, fractions, end_holds=("face", "backbone"), dim: int = 2,
+            chain_units: int = 5) -> dict:
+    """The three-chamber unit (free, blocked per hold) and the chain (free, end rotations) per pressure pair.
 
     Returns arrays: ``free_angle_deg``, ``free_status`` (point); ``blocked_moment_nm``,
-    ``blocked_status`` (hold, point); ``end_angle_deg`` (point, fraction);
-    ``moment_fea_nm``, ``backbone_angle_deg``, ``status``, ``wall_time_s``
-    (hold, point, fraction).  Angles per unit, deg; moments N m per unit.
+    ``blocked_status``, ``blocked_load_factor`` (hold, point); ``chain_free_deg``
+    (point, the chain's total free angle per unit); ``chain_moment_nm``,
+    ``chain_mid_angle_deg``, ``chain_status`` (point, state: free, then each
+    fraction); ``wall_time_s`` (point).  Angles per unit, deg; moments N m per unit.
     """
     pairs = np.asarray(pairs_kpa, float).reshape(-1, 2)
     fr = np.asarray(fractions, float)
     holds = list(end_holds)
-    mesh = fem.unit_mesh_from_config(actuator, dim)
-    n = int(mesh.geometry["n_chambers"])
-    npt, nh, nf = len(pairs), len(holds), len(fr)
+    unit = fem.unit_mesh_from_config(actuator, dim)
+    geom = dict(unit.geometry, n_chambers=int(chain_units))
+    h = unit.h
+    chain = fem.build_unit_mesh(geom, h=h, dim=dim, end_gaps=True, **fem.layer_options(actuator))
+    n = int(unit.geometry["n_chambers"])
+    mid = int(chain_units) // 2
+    npt, nh, ns = len(pairs), len(holds), 1 + len(fr)
     out = {
-        "free_angle_deg": np.full(npt, np.nan), "free_status": np.full(npt, 3, np.int32),
+        "free_angle_deg": np.full(npt, np.nan), "free_status": np.full(npt, NOT_RUN, np.int32),
         "blocked_moment_nm": np.full((nh, npt), np.nan), "blocked_status": np.full((nh, npt), NOT_RUN, np.int32),
-        "end_angle_deg": np.full((npt, nf), np.nan), "moment_fea_nm": np.full((nh, npt, nf), np.nan),
-        "backbone_angle_deg": np.full((nh, npt, nf), np.nan), "status": np.full((nh, npt, nf), NOT_RUN, np.int32),
-        "wall_time_s": np.full((nh, npt, nf), np.nan),
+        "blocked_load_factor": np.full((nh, npt), np.nan),
+        "chain_free_deg": np.full(npt, np.nan), "chain_moment_nm": np.full((npt, ns), np.nan),
+        "chain_mid_angle_deg": np.full((npt, ns), np.nan), "chain_status": np.full((npt, ns), NOT_RUN, np.int32),
+        "wall_time_s": np.zeros(npt),
     }
     for i, (pt, pb) in enumerate(pairs):
-        free, t = _solve(actuator, dim, mesh, pt, pb, "free")
+        free, t = _solve(actuator, dim, unit, pt, pb, "free")
+        out["wall_time_s"][i] += t
         out["free_status"][i] = free.status
-        log.info("P = (%g, %g) kPa: free angle %.3f deg/unit, status %d, %.1f s", pt, pb, free.bending_angle_deg, free.status, t,
-                 extra=solved(free.status != 0))
-        if free.status:
+        out["free_angle_deg"][i] = free.bending_angle_total_deg / n if free.status == 0 else np.nan
+        log.info("P = (%g, %g) kPa: unit free angle %.3f deg/unit, status %d, %.1f s", pt, pb,
+                 free.bending_angle_total_deg / n, free.status, t)
+        for k, hold in enumerate(holds):
+            blk, t = _solve(actuator, dim, unit, pt, pb, "blocked", end_hold=hold)
+            out["wall_time_s"][i] += t
+            out["blocked_status"][k, i], out["blocked_load_factor"][k, i] = blk.status, blk.load_factor
+            out["blocked_moment_nm"][k, i] = blk.bending_moment_nm if blk.status == 0 else np.nan
+            log.info("  %s hold: blocked moment %.5f N m, status %d at %.3f of the load, %.1f s", hold,
+                     blk.bending_moment_nm, blk.status, blk.load_factor, t)
+        cf, t = _solve(actuator, dim, chain, pt, pb, "free", keep_displacement=True)
+        out["wall_time_s"][i] += t
+        out["chain_status"][i, 0] = cf.status
+        if cf.status:
             continue
-        total = free.bending_angle_total_deg
-        out["free_angle_deg"][i] = total / n
-        out["end_angle_deg"][i] = fr * total / n
-        for h, hold in enumerate(holds):
-            blk, t = _solve(actuator, dim, mesh, pt, pb, "blocked", end_hold=hold)
-            out["blocked_status"][h, i] = blk.status
-            out["blocked_moment_nm"][h, i] = blk.bending_moment_nm if blk.status == 0 else np.nan
-            log.info("  %s: blocked moment %.5f N m, status %d, %.1f s", hold, blk.bending_moment_nm, blk.status, t,
-                     extra=solved(blk.status != 0))
-            for j, f in enumerate(fr):
-                rot, t = _solve(actuator, dim, mesh, pt, pb, "rotation", end_hold=hold, end_angle_deg=f * total)
-                out["status"][h, i, j] = rot.status
-                out["wall_time_s"][h, i, j] = t
-                if rot.status == 0:  # a stalled ray's last state is not at the prescribed angle
-                    out["moment_fea_nm"][h, i, j] = rot.bending_moment_nm
-                    out["backbone_angle_deg"][h, i, j] = rot.bending_angle_deg
-                log.info("    theta = %.2f theta_f: M = %.5f N m, status %d (%s), %.1f s", f, rot.bending_moment_nm,
-                         rot.status, rot.reason, t, extra=solved(rot.status != 0))
+        total = cf.bending_angle_total_deg
+        out["chain_free_deg"][i] = total / chain_units
+        out["chain_moment_nm"][i, 0] = 0.0
+        out["chain_mid_angle_deg"][i, 0] = unit_rotations_deg(chain, cf.displacement)[mid]
+        for j, f in enumerate(fr, start=1):
+            case = "blocked" if f == 0 else "rotation"
+            r, t = _solve(actuator, dim, chain, pt, pb, case, end_hold="face", end_angle_deg=f * total,
+                          keep_displacement=True)
+            out["wall_time_s"][i] += t
+            out["chain_status"][i, j] = r.status
+            if r.status == 0:  # a stalled ray's last state is not at the prescribed angle
+                out["chain_moment_nm"][i, j] = r.bending_moment_nm
+                out["chain_mid_angle_deg"][i, j] = unit_rotations_deg(chain, r.displacement)[mid]
+            log.info("  chain of %d at %.2f of its free angle: M = %.5f N m, middle unit %.3f deg, status %d, %.1f s",
+                     chain_units, f, r.bending_moment_nm, out["chain_mid_angle_deg"][i, j], r.status, t)
     return out
 
 
-def _model(free_deg, blocked_nm, pairs, shape_c: float, theta_scale_deg: float) -> UnitModel:
-    fa = lookup(pairs[:, 0], pairs[:, 1], free_deg)
-    mb = lookup(pairs[:, 0], pairs[:, 1], blocked_nm)
-    return UnitModel(fa, mb, shape_c=shape_c, theta_scale_deg=theta_scale_deg)
-
-
-def compare(fea: dict, pairs_kpa, fractions, end_holds, shape_c: float = 0.0, theta_scale_deg: float | None = None
-            ) -> xr.Dataset:
-    """The check dataset: FEA against the unit model (shape ``shape_c``) built on the same FEA runs.
-
-    ``theta_scale_deg`` (deg per unit) is the model's theta_s; default the
-    largest |free angle| of the check.  Also fits shape_c per hold
-    (`workflow.unit_model.fit_shape`, angle residuals) for information.
-    """
+def compare(fea: dict, pairs_kpa, fractions, end_holds) -> xr.Dataset:
+    """The check dataset: the chain's middle unit against each hold's spring, and the evidence per hold."""
     pairs = np.asarray(pairs_kpa, float).reshape(-1, 2)
     fr = np.asarray(fractions, float)
     holds = list(end_holds)
-    ths = float(np.nanmax(np.abs(fea["free_angle_deg"]))) if theta_scale_deg is None else float(theta_scale_deg)
-    pt = np.broadcast_to(pairs[:, 0, None], (len(pairs), len(fr)))
-    pb = np.broadcast_to(pairs[:, 1, None], (len(pairs), len(fr)))
-    shape = (len(holds), len(pairs), len(fr))
-    m_model, a_model, m_lin = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
-    c_fit, rms_fit = np.full(len(holds), np.nan), np.full(len(holds), np.nan)
-    for h in range(len(holds)):
-        model = _model(fea["free_angle_deg"], fea["blocked_moment_nm"][h], pairs, shape_c, ths)
-        m_model[h] = model_moment_nm(model, pt, pb, fea["end_angle_deg"])
-        m_lin[h] = model_moment_nm(model.with_shape(0.0), pt, pb, fea["end_angle_deg"])
-        a_model[h] = model.angle_deg(pt, pb, np.nan_to_num(fea["moment_fea_nm"][h]))
-        ok = np.isfinite(fea["moment_fea_nm"][h])
-        inner = ok & (fr[None, :] > 0) & (fr[None, :] < 1)  # the shape term vanishes at both ends
-        if inner.any():
-            fitted = fit_shape(model, pt[ok], pb[ok], fea["moment_fea_nm"][h][ok], fea["end_angle_deg"][ok])
-            c_fit[h] = fitted.shape_c
-            r = model_moment_nm(fitted, pt, pb, fea["end_angle_deg"])[ok] - fea["moment_fea_nm"][h][ok]
-            mb = np.broadcast_to(fea["blocked_moment_nm"][h][:, None], pt.shape)[ok]
-            rms_fit[h] = float(np.sqrt(np.mean((r / np.abs(mb)) ** 2)))
-    mb3 = np.broadcast_to(fea["blocked_moment_nm"][:, :, None], shape)
-    err = np.where(fea["status"] == 0, m_model - fea["moment_fea_nm"], np.nan)
-    err_lin = np.where(fea["status"] == 0, m_lin - fea["moment_fea_nm"], np.nan)
-    rel = err / np.abs(mb3)
-    d3, d2 = ("end_hold", "point", "fraction"), ("end_hold", "point")
+    npt, nh = len(pairs), len(holds)
+    M, th = fea["chain_moment_nm"], fea["chain_mid_angle_deg"]
+    ok = (fea["chain_status"] == 0) & np.isfinite(M) & np.isfinite(th)
+    # the chain's interior unit: least-squares line theta_mid = a - c M per pair
+    c_chain, a_chain = np.full(npt, np.nan), np.full(npt, np.nan)
+    for i in range(npt):
+        if ok[i].sum() >= 2:
+            slope, icpt = np.polyfit(M[i, ok[i]], th[i, ok[i]], 1)
+            c_chain[i], a_chain[i] = -slope, icpt
+    thf = fea["free_angle_deg"]
+    c_hold = thf[None, :] / fea["blocked_moment_nm"]  # deg per N m
+    pred = thf[None, :, None] - c_hold[:, :, None] * M[None]
+    err = np.where(ok[None], pred - th[None], np.nan)
+    rms = np.sqrt(np.nanmean(err**2, axis=2)) if np.isfinite(err).any() else np.full((nh, npt), np.nan)
+    ratio = c_hold / c_chain[None, :]
+    with np.errstate(invalid="ignore"):
+        score = np.array([np.nanmean(np.abs(np.log(ratio[k]))) if np.isfinite(ratio[k]).any() else np.inf
+                          for k in range(nh)])
+    best = holds[int(np.argmin(score))] if np.isfinite(score).any() else ""
+    states = ["free"] + [f"{f:g}" for f in fr]
     flags = dict(fem.STATUS_FLAGS)
     flags[NOT_RUN] = "not_run"
+    flag_attrs = {"flag_values": np.array(sorted(flags), dtype=np.int32), "flag_meanings": " ".join(flags[k] for k in sorted(flags))}
+    d2, d3 = ("end_hold", "point"), ("end_hold", "point", "state")
     ds = xr.Dataset(
         {
-            "free_angle_deg": ("point", fea["free_angle_deg"], {"units": "degree", "long_name": "FEA free bending angle per unit"}),
-            "blocked_moment_nm": (d2, fea["blocked_moment_nm"], {"units": "N m", "long_name": "FEA blocked moment per unit (end held at 0)"}),
-            "end_angle_deg": (("point", "fraction"), fea["end_angle_deg"],
-                              {"units": "degree", "long_name": "prescribed end inclination per unit (fraction * free angle)"}),
-            "backbone_angle_deg": (d3, fea["backbone_angle_deg"],
-                                   {"units": "degree", "long_name": "FEA backbone angle per unit at the prescribed inclination"}),
-            "moment_fea_nm": (d3, fea["moment_fea_nm"],
-                              {"units": "N m", "long_name": "FEA couple holding the end at the prescribed inclination"}),
-            "moment_model_nm": (d3, m_model, {"units": "N m", "long_name": f"unit-model moment at that angle (shape_c = {shape_c:g})"}),
-            "moment_linear_nm": (d3, m_lin, {"units": "N m", "long_name": "linear-spring moment at that angle (shape_c = 0)"}),
-            "moment_error_nm": (d3, err, {"units": "N m", "long_name": "model minus FEA moment"}),
-            "moment_error_linear_nm": (d3, err_lin, {"units": "N m", "long_name": "linear spring minus FEA moment"}),
-            "moment_error_rel": (d3, rel, {"units": "1", "long_name": "model minus FEA moment / |blocked moment|"}),
-            "angle_model_deg": (d3, np.where(fea["status"] == 0, a_model, np.nan),
-                                {"units": "degree", "long_name": "unit-model angle per unit under the FEA moment"}),
-            "angle_error_deg": (d3, np.where(fea["status"] == 0, a_model - fea["end_angle_deg"][None], np.nan),
-                                {"units": "degree", "long_name": "model angle minus prescribed angle, per unit"}),
-            "shape_c_fit": ("end_hold", c_fit, {"units": "1", "long_name": "least-squares shape_c from these FEA points"}),
-            "moment_error_rel_rms_fit": ("end_hold", rms_fit, {"units": "1", "long_name": "rms relative moment error with shape_c_fit"}),
-            "status": (d3, fea["status"], {"units": "1", "long_name": "rotation solve status",
-                                           "flag_values": np.array(sorted(flags), dtype=np.int32),
-                                           "flag_meanings": " ".join(flags[k] for k in sorted(flags))}),
-            "free_status": ("point", fea["free_status"], {"units": "1", "long_name": "free solve status (0 = converged)"}),
-            "blocked_status": (d2, fea["blocked_status"], {"units": "1", "long_name": "blocked solve status (0 = converged)"}),
-            "wall_time_s": (d3, fea["wall_time_s"], {"units": "s", "long_name": "wall time of the rotation solve"}),
+            "free_angle_deg": ("point", thf, {"units": "degree", "long_name": "three-chamber unit: free bending angle per unit"}),
+            "blocked_moment_nm": (d2, fea["blocked_moment_nm"], {"units": "N m", "long_name": "three-chamber unit: blocked moment per hold"}),
+            "blocked_status": (d2, fea["blocked_status"], {"units": "1", "long_name": "blocked solve status", **flag_attrs}),
+            "blocked_load_factor": (d2, fea["blocked_load_factor"], {"units": "1", "long_name": "last converged load factor of the blocked solve"}),
+            "hold_compliance_deg_per_nm": (d2, c_hold, {"units": "degree/(N m)", "long_name": "spring compliance theta_f / M_b of the hold"}),
+            "chain_free_angle_deg": ("point", fea["chain_free_deg"], {"units": "degree", "long_name": "chain: total free angle / units"}),
+            "chain_moment_nm": (("point", "state"), M, {"units": "N m", "long_name": "chain: end couple (carried by every unit)"}),
+            "chain_mid_angle_deg": (("point", "state"), th, {"units": "degree", "long_name": "chain: middle unit's rotation"}),
+            "chain_status": (("point", "state"), fea["chain_status"], {"units": "1", "long_name": "chain solve status", **flag_attrs}),
+            "chain_compliance_deg_per_nm": ("point", c_chain, {"units": "degree/(N m)", "long_name": "chain: middle unit's compliance -d theta/dM (least squares)"}),
+            "chain_free_mid_fit_deg": ("point", a_chain, {"units": "degree", "long_name": "chain: middle unit's rotation at M = 0 (least-squares line)"}),
+            "compliance_ratio": (d2, ratio, {"units": "1", "long_name": "hold compliance / chain compliance (1 = the hold's spring has the interior unit's stiffness)"}),
+            "angle_pred_deg": (d3, pred, {"units": "degree", "long_name": "hold's spring: middle unit's rotation under the chain's couple"}),
+            "angle_error_deg": (d3, err, {"units": "degree", "long_name": "spring prediction minus the chain's middle unit"}),
+            "angle_error_rms_deg": (d2, rms, {"units": "degree", "long_name": "rms prediction error over the chain's states"}),
+            "evidence_score": ("end_hold", score, {"units": "1", "long_name": "mean |ln(compliance ratio)| over the pairs (0 = exact)"}),
+            "wall_time_s": ("point", fea["wall_time_s"], {"units": "s", "long_name": "wall time of the pair's solves"}),
         },
         coords={
             "end_hold": ("end_hold", holds, {"long_name": "end nodes held plane (face: whole end face; backbone: paper + base layers)"}),
-            "point": ("point", np.arange(len(pairs))),
-            "fraction": ("fraction", fr, {"units": "1", "long_name": "prescribed end inclination / free angle"}),
+            "point": ("point", np.arange(npt)),
+            "state": ("state", states, {"long_name": "chain state: free, or its end held at this fraction of its free angle"}),
             "p_top_kpa": ("point", pairs[:, 0], {"units": "kPa", "long_name": "top chamber pressure P_T"}),
             "p_bottom_kpa": ("point", pairs[:, 1], {"units": "kPa", "long_name": "bottom chamber pressure P_B"}),
         },
     )
-    ds.attrs["shape_c"] = float(shape_c)
-    ds.attrs["theta_scale_deg"] = ths
-    for h, hold in enumerate(holds):
-        e = np.abs(rel[h])
-        ds.attrs[f"max_abs_rel_error_{hold}"] = float(np.nanmax(e)) if np.isfinite(e).any() else np.nan
-        ds.attrs[f"mean_abs_rel_error_{hold}"] = float(np.nanmean(e)) if np.isfinite(e).any() else np.nan
-        ds.attrs[f"failed_rotations_{hold}"] = int(np.sum(fea["status"][h] != 0))
+    ds.attrs["best_end_hold"] = best
+    for k, hold in enumerate(holds):
+        ds.attrs[f"evidence_score_{hold}"] = float(score[k])
+        ds.attrs[f"failed_blocked_{hold}"] = int(np.sum(fea["blocked_status"][k] != 0))
     return ds
 
 
-def moment_check(actuator: Mapping, check: Mapping | None = None, shape_c: float = 0.0) -> xr.Dataset:
-    """Run the check's FEA points (``actuator.moment_check``) and compare with the unit model."""
+def moment_check(actuator: Mapping, check: Mapping | None = None) -> xr.Dataset:
+    """Run the check's FEA points (``actuator.moment_check``) and compare each hold with the chain."""
     c = dict(DEFAULT_CHECK)
     c.update(dict(check or {}))
     dim = int(str(c["model"])[0])
-    fea = run_fea(actuator, c["pairs_kpa"], c["fractions"], c["end_holds"], dim)
-    ds = compare(fea, c["pairs_kpa"], c["fractions"], c["end_holds"], shape_c=shape_c)
-    ds.attrs["model"] = str(c["model"])
+    fea = run_fea(actuator, c["pairs_kpa"], c["fractions"], c["end_holds"], dim, int(c["chain_units"]))
+    ds = compare(fea, c["pairs_kpa"], c["fractions"], c["end_holds"])
+    ds.attrs.update({"model": str(c["model"]), "chain_units": int(c["chain_units"]),
+                     "end_hold_in_use": str(actuator.get("end_hold", fem.DEFAULT_END_HOLD))})
+    log.info("end holds against the chain's middle unit (mean |ln compliance ratio|): %s; best: %s",
+             ", ".join(f"{h} {ds.attrs[f'evidence_score_{h}']:.3f}" for h in c["end_holds"]), ds.attrs["best_end_hold"])
+    if ds.attrs["best_end_hold"] and ds.attrs["best_end_hold"] != ds.attrs["end_hold_in_use"]:
+        log.warning("actuator.end_hold = %s, but the chain check favours %s", ds.attrs["end_hold_in_use"],
+                    ds.attrs["best_end_hold"])
     return ds
 
 
 def plot_moment_check(ds: xr.Dataset, out: str | Path) -> Path:
-    """Moment against angle per unit, FEA markers and model lines, per pressure pair and end hold."""
+    """Middle unit's rotation against the chain's couple (markers) and each hold's spring (lines), per pair."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    markers = {"backbone": "o", "face": "s"}
-    colours = plt.cm.viridis(np.linspace(0, 0.8, ds.sizes["point"]))
-    for h, hold in enumerate(ds["end_hold"].values):
-        for i in range(ds.sizes["point"]):
-            thf = float(ds["free_angle_deg"][i])
-            mb = float(ds["blocked_moment_nm"][h, i])
-            if not (np.isfinite(thf) and np.isfinite(mb)):
-                continue
-            th = np.concatenate([[0.0], ds["end_angle_deg"][i].values])  # the blocked run is theta = 0
-            m = np.concatenate([[mb], ds["moment_fea_nm"][h, i].values])
-            lab = f"P = ({ds.p_top_kpa.values[i]:g}, {ds.p_bottom_kpa.values[i]:g}) kPa, {hold}"
-            ls = "-" if hold == "backbone" else ":"
-            mk = dict(marker=markers.get(hold, "^"), ls="none", color=colours[i], mfc="none" if hold == "face" else colours[i])
-            x = np.linspace(min(0.0, np.nanmin(th / thf)), max(1.0, np.nanmax(th / thf)), 50)
-            # linear spring M = M_b (1 - theta / theta_f), absolute and normalised
-            axes[0].plot(x * thf, mb * (1 - x), ls, color=colours[i], lw=1)
-            axes[0].plot(th, m, label=lab, **mk)
-            axes[1].plot(x, 1 - x, ls, color="0.5", lw=1)
-            axes[1].plot(th / thf, m / mb, **mk)
-    axes[0].set_xlabel("end inclination per unit (deg)")
-    axes[0].set_ylabel("end moment per unit (N m)")
-    axes[1].set_xlabel("inclination / free angle")
-    axes[1].set_ylabel("moment / blocked moment")
-    for ax in axes:
+    npt = ds.sizes["point"]
+    fig, axes = plt.subplots(1, npt, figsize=(4.2 * npt, 3.8), squeeze=False)
+    styles = {"face": "-", "backbone": ":"}
+    for i, ax in enumerate(axes[0]):
+        M, th = ds["chain_moment_nm"][i].values, ds["chain_mid_angle_deg"][i].values
+        ax.plot(M, th, "ko", label="chain of %d: middle unit" % ds.attrs.get("chain_units", 5))
+        mmax = np.nanmax(np.concatenate([M, ds["blocked_moment_nm"][:, i].values]))
+        m = np.linspace(0.0, mmax if np.isfinite(mmax) else 1.0, 20)
+        for k, hold in enumerate(ds["end_hold"].values):
+            thf, mb = float(ds["free_angle_deg"][i]), float(ds["blocked_moment_nm"][k, i])
+            if np.isfinite(thf) and np.isfinite(mb):
+                ax.plot(m, thf * (1 - m / mb), styles.get(str(hold), "--"), label=f"spring, {hold} hold")
+        ax.set_title(f"P = ({ds.p_top_kpa.values[i]:g}, {ds.p_bottom_kpa.values[i]:g}) kPa", fontsize=9)
+        ax.set_xlabel("end moment per unit (N m)")
+        ax.set_ylabel("unit rotation (deg)")
         ax.axhline(0.0, color="0.6", lw=0.5)
         ax.grid(alpha=0.3)
-    axes[1].set_ylim(-2.0, 1.5)
-    axes[0].legend(fontsize=7)
-    fig.suptitle("Unit under an end rotation: FEA (markers; open = face hold) vs linear spring (lines)", fontsize=9)
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("A unit inside a chain under an end moment vs the unit model's spring per end hold", fontsize=9)
     fig.tight_layout()
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -294,13 +304,12 @@ def plot_moment_check(ds: xr.Dataset, out: str | Path) -> Path:
 
 def write_moment_check(nc_path: str | Path, plot_path: str | Path, actuator: Mapping, unit_model: Mapping | None = None,
                        *, rule: str = "unit_moment_check", config_slice=None) -> xr.Dataset:
-    """Run the check with ``actuator.moment_check`` and ``unit_model.shape_c``; write the dataset and plot."""
+    """Run the check with ``actuator.moment_check``; write the dataset and plot."""
     from workflow.provenance import write_dataset
 
-    shape_c = float(dict(unit_model or {}).get("shape_c", 0.0))
-    ds = moment_check(actuator, actuator.get("moment_check"), shape_c=shape_c)
+    ds = moment_check(actuator, actuator.get("moment_check"))
     write_dataset(ds, nc_path, rule=rule, config_slice=config_slice if config_slice is not None else dict(actuator),
-                  title="PNA unit under a prescribed end rotation: FEA couple vs the unit model (issue 5 item 4)",
-                  source="workflow.fem (case rotation) and workflow.unit_model on the same FEA free/blocked runs")
+                  title="PNA unit under an end moment: the unit model's spring per end hold vs a unit inside a chain",
+                  source="workflow.fem (three-chamber unit: free, blocked; chain cut at gap centres: free, end rotations)")
     plot_moment_check(ds, plot_path)
     return ds

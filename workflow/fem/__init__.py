@@ -22,16 +22,20 @@ the couple (the moment-angle curve between free and blocked; issue 5 item 4)::
 
     res = fem.solve_unit(mesh, 180, 0, case="rotation", end_angle_deg=30.0, end_hold="backbone")
 
-``end_hold`` (blocked and rotation): ``face`` holds the whole end face plane,
-``backbone`` only its paper and base layers (see ``held_end_nodes``).
+``end_hold`` (blocked and rotation): ``face`` (default) holds the whole end
+face plane, ``backbone`` only its paper and base layers (see ``held_end_nodes``).
 
-Physics: three-term Mooney-Rivlin silicone on isochoric invariants with a
-mean-dilatation (Q1/P0, condensed) volumetric part K = bulk_ratio * mu0;
-compressible neo-Hooke paper layer (E = 1.2 GPa, nu = 0.2); follower
+Physics: three-term Mooney-Rivlin silicone (Table 5) on isochoric invariants
+with a mean-dilatation (Q1/P0, condensed) volumetric part K = bulk_ratio *
+mu0; compressible neo-Hooke paper layer (E = 1.2 GPa, nu = 0.2) on
+enhanced-strain (incompatible-mode) elements, which bend without shear
+locking one element thick (``formulation``; ``FORMULATIONS``); follower
 pressure on the cavity walls with its exact load stiffness; penalty
-node-to-segment / node-to-face contact across the gaps; Newton with line
-search and adaptive load steps.  Units: mm, MPa, N (kPa for pressures and
-N m for the reported moments).
+self-contact of every gap and every pocket (``ContactPair.self_contact``);
+Newton with line search and adaptive load steps.  Every accepted step also
+records the global overlap check (``overlap_measures``: deepest boundary
+node inside a foreign element, smallest pocket).  Units: mm, MPa, N (kPa for
+pressures and N m for the reported moments).
 """
 
 from ._assembly import SolidAssembler

@@ -64,6 +64,8 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
     angle_total = np.full(shape, np.nan)
     moment = np.full(shape, np.nan)
     pen = np.full(shape, np.nan)
+    overlap = np.full(shape, np.nan)
+    pocket = {2: np.full(shape, np.nan), 3: np.full(shape, np.nan)}
     wall = np.full(shape, np.nan)
     status = np.full(shape, 3, dtype=np.int32)
     iters = np.zeros(shape, dtype=np.int32)
@@ -95,7 +97,11 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
                 status[i, j, k] = 0
                 iters[i, j, k] = sum(x["iterations"] for x in res.history if x["lam"] <= h["lam"])
                 wall[i, j, k] = h["wall_time_s"]
-                pen[i, j, k] = max(x["max_penetration_mm"] for x in res.history if x["lam"] <= h["lam"])
+                upto = [x for x in res.history if x["lam"] <= h["lam"]]
+                pen[i, j, k] = max(x["max_penetration_mm"] for x in upto)
+                overlap[i, j, k] = max(x["overlap_depth_mm"] for x in upto)
+                key = "min_pocket_area_mm2" if dim == 2 else "min_pocket_volume_mm3"
+                pocket[dim][i, j, k] = min(x[key] for x in upto)
                 angle[i, j, k] = h["bending_angle_deg"]
                 angle_total[i, j, k] = h["bending_angle_total_deg"]
                 moment[i, j, k] = h["bending_moment_nm"]
@@ -111,7 +117,10 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
                                         {"units": "degree", "long_name": "free bending angle of the three-chamber unit model"}),
             "bending_moment_nm": (("model", "p_top_kpa"), moment[:, :, 1],
                                   {"units": "N m", "long_name": "blocked moment per unit, full actuator width"}),
-            "max_penetration_mm": (dims3, pen, {"units": "mm", "long_name": "largest contact penetration over the load path"}),
+            "max_penetration_mm": (dims3, pen, {"units": "mm", "long_name": "largest penetration over the load path (contact or overlap check)"}),
+            "overlap_depth_mm": (dims3, overlap, {"units": "mm", "long_name": "deepest boundary node inside another element over the load path"}),
+            "min_pocket_area_mm2": (dims3, pocket[2], {"units": "mm2", "long_name": "smallest pocket area over the load path (2D; 36.4 at rest)"}),
+            "min_pocket_volume_mm3": (dims3, pocket[3], {"units": "mm3", "long_name": "smallest pocket volume over the load path (3D; 509.6 at rest)"}),
             "wall_time_s": (dims3, wall, {"units": "s", "long_name": "wall time of the solve from zero load"}),
             "newton_iterations": (dims3, iters, {"units": "1", "long_name": "Newton iterations over the load path"}),
             "status": (dims3, status, {"units": "1", "long_name": "solver status",
@@ -164,7 +173,7 @@ def write_unit_check(nc_path: str | Path, vtu_path: str | Path, actuator: Mappin
     ds.attrs.update({k: str(v) for k, v in dict(attrs or {}).items()})
     write_dataset(ds, nc_path, rule=rule, config_slice=config_slice if config_slice is not None else dict(actuator),
                   title="PNA unit check: free bending angle and blocked moment at P_T = 60, 180, 300 kPa (P_B = 0)",
-                  source="workflow.fem (scikit-fem, mean-dilatation Q1/P0, follower pressure, penalty contact)")
+                  source="workflow.fem (scikit-fem; Q1/P0 silicone, enhanced-strain paper layer, follower pressure, penalty self-contact)")
     if deformed is None:
         mesh = unit_mesh_from_config(actuator, 3)
         deformed = (mesh, np.zeros(mesh.mesh.p.size))

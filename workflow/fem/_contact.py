@@ -110,21 +110,29 @@ def _segment_2d(X: np.ndarray, has_prev: np.ndarray, has_next: np.ndarray):
     return xi, n, g
 
 
-def _excluded(facets: np.ndarray, nodes: np.ndarray) -> list[set]:
-    """Per node, the facets of ``facets`` it must not pair with: those touching its star's nodes.
+def _excluded(facets: np.ndarray, nodes: np.ndarray, parts: np.ndarray | None = None) -> list[set]:
+    """Per node, the facets of ``facets`` it must not pair with.
 
-    The star of a node is the set of facets containing it; a facet that shares
-    a node with the star (the node's own facets and their neighbours) lies
-    next to the node on the same surface, where a gap is meaningless.
+    Those that touch its star's nodes (the star of a node is the set of facets
+    containing it: a facet that shares a node with the star lies next to the
+    node on the same surface, where a gap is meaningless) and, with ``parts``
+    (a part id per facet), every facet of the parts the node belongs to (a
+    wall never contacts itself; near a convex corner of one block the ring
+    alone would let a node see its own block's next facets from behind).
     """
     by_node: dict[int, set] = {}
     for k, f in enumerate(facets):
         for a in f:
             by_node.setdefault(int(a), set()).add(k)
+    by_part = {} if parts is None else {int(q): set(np.flatnonzero(parts == q).tolist()) for q in np.unique(parts)}
     out = []
     for s in nodes:
-        ring = {int(a) for k in by_node[int(s)] for a in facets[k]}
-        out.append(set().union(*(by_node[a] for a in ring)))
+        star = by_node[int(s)]
+        ring = {int(a) for k in star for a in facets[k]}
+        excl = set().union(*(by_node[a] for a in ring))
+        if parts is not None:
+            excl |= set().union(*(by_part[int(parts[k])] for k in star))
+        out.append(excl)
     return out
 
 
@@ -183,13 +191,16 @@ class ContactPair:
 
     @classmethod
     def self_contact(cls, p: np.ndarray, surfaces, search: float = 1.0, extend: float = 0.5, smoothing: float = 0.0,
-                     smooth_normals: bool = True, penalty_factor: float = 1.0) -> "ContactPair":
-        """Self-contact of each surface (list of outward-oriented facet arrays; surfaces must not share nodes)."""
+                     smooth_normals: bool = True, penalty_factor: float = 1.0, parts=None) -> "ContactPair":
+        """Self-contact of each surface (list of outward-oriented facet arrays; surfaces must not share nodes).
+
+        ``parts``: per surface a part id per facet (or None): see ``_excluded``.
+        """
         obj = cls.__new__(cls)
         slave, area, pools, start = [], [], [], 0
-        for f in surfaces:
+        for i, f in enumerate(surfaces):
             nd, a = _tributary(p, f)
-            excl = _excluded(f, nd)
+            excl = _excluded(f, nd, None if parts is None else parts[i])
             allf = np.arange(f.shape[0])
             pools += [start + np.setdiff1d(allf, sorted(e)) for e in excl]
             slave.append(nd)
@@ -225,7 +236,17 @@ class ContactPair:
                 self.prev[:] = -1
                 self.next[:] = -1
         else:
-            self.lim = np.where(on_edge.any(axis=1), 1.0 + 2.0 * extend, 1.0)
+            # per facet and reference direction (xi, eta) the range [lo, hi]: widened only across a free
+            # edge (an edge of no other master facet), so that coplanar faces meeting at a corner are not
+            # extended over each other
+            edges = [(0, 1), (1, 2), (2, 3), (3, 0)]  # at eta = -1, xi = +1, eta = +1, xi = -1
+            keys = np.sort(np.stack([master_facets[:, list(e)] for e in edges], axis=1), axis=2)  # (nm, 4, 2)
+            _, inv, cnt = np.unique(keys.reshape(-1, 2), axis=0, return_inverse=True, return_counts=True)
+            free = (cnt[inv.ravel()] == 1).reshape(-1, 4)
+            wide = 1.0 + 2.0 * extend
+            self.lim = np.stack([np.stack([np.where(free[:, 3], -wide, -1.0), np.where(free[:, 1], wide, 1.0)], -1),
+                                 np.stack([np.where(free[:, 0], -wide, -1.0), np.where(free[:, 2], wide, 1.0)], -1)],
+                                axis=1)  # (nm, 2 directions, lo/hi)
 
     def _project(self, x: np.ndarray):
         """Closest master facet per slave: (facet index, N (ns, nfn), n (ns, dim), g (ns,), inside)."""
@@ -256,7 +277,8 @@ class ContactPair:
         nrm = np.cross(a1, a2)
         nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
         g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
-        inside = np.all(np.abs(ab) <= self.lim[cand][..., None] + 1e-6, axis=-1)
+        lim = self.lim[cand]  # (ns, k, 2, 2)
+        inside = np.all((ab >= lim[..., 0] - 1e-6) & (ab <= lim[..., 1] + 1e-6), axis=-1)
         # closest facet = smallest distance to the projection clipped onto the facet itself
         # (as in 2D), so that an edge facet's extension never wins over the facet a slave is on
         abc = np.clip(ab, -1.0, 1.0)
@@ -339,8 +361,11 @@ class ContactPair:
             deta = 0.25 * _XI[:, 1] * (1 + _XI[:, 0] * ab[:, 0, None])
             n = np.cross(np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm))
             n /= np.linalg.norm(n, axis=1, keepdims=True)
-            (L,) = lim
-            w = np.prod(np.where(np.abs(ab) > 1, _window((L[:, None] - np.abs(ab)) / np.maximum(L[:, None] - 1.0, 1e-12)), 1.0), axis=1)
+            (L,) = lim  # (nc, 2 directions, lo/hi)
+            lo, hi = L[..., 0], L[..., 1]
+            # the penalty fades to 0 across the widened range past a free edge (continuous as a slave slides off)
+            w = np.prod(np.where(ab > 1, _window((hi - ab) / np.maximum(hi - 1.0, 1e-12)), 1.0)
+                        * np.where(ab < -1, _window((ab - lo) / np.maximum(-1.0 - lo, 1e-12)), 1.0), axis=1)
         g = np.einsum("ci,ci->c", xs - np.einsum("ca,cai->ci", N, xm), n)
         coef = np.concatenate([np.ones((X.shape[0], 1)), -N], axis=1)
         dg = (coef[:, :, None] * n[:, None, :]).reshape(X.shape[0], -1)
@@ -385,7 +410,7 @@ class ContactPair:
             E = np.eye(nd) * step
             Xf = X.reshape(nc, -1)
             Xb = np.concatenate([Xf[None] + E[:, None, :], Xf[None] - E[:, None, :]])  # (2nd, nc, nd)
-            limb = tuple(np.tile(a, 2 * nd) for a in lim)
+            limb = tuple(np.tile(a, (2 * nd,) + (1,) * (a.ndim - 1)) for a in lim)
             fb = self._local_force(Xb.reshape((-1,) + X.shape[1:]), np.tile(w, 2 * nd), limb).reshape(2, nd, nc, nd)
             K = ((fb[0] - fb[1]) / (2 * step)).transpose(1, 2, 0)
         return dofs, f, K, gmin
@@ -410,4 +435,5 @@ def contact_pairs_from_mesh(unit_mesh, search: float = 1.0, extend: float = 0.5,
     surfaces = [unit_mesh.facets[name] for name in unit_mesh.contact_surfaces]
     if not surfaces:
         return []
-    return [ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals)]
+    parts = [unit_mesh.contact_parts.get(name) for name in unit_mesh.contact_surfaces]
+    return [ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals, parts=parts)]

@@ -92,7 +92,8 @@ def couple_meshes(act: UnitMesh, offset: Sequence[float], finger: FingerMesh) ->
     facets.update({f"finger_{k}": v + n_act for k, v in finger.facets.items()})
     nodes = dict(act.nodes)
     um = UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=act.geometry, h=act.h,
-                  contact_surfaces=list(act.contact_surfaces), chamber_group=act.chamber_group)
+                  contact_surfaces=list(act.contact_surfaces), contact_parts=dict(act.contact_parts),
+                  chamber_group=act.chamber_group)
     return CoupledMesh(mesh=mesh, material=material, body=body, act=act, offset=off, n_act=n_act, finger=finger, um=um)
 
 

@@ -82,7 +82,7 @@ class UnitMesh:
         solid is ``R (x2 - x1)`` (2D) or ``x_xi x x_eta`` (3D).  Keys
         ``cavity_top``, ``cavity_bottom``; per gap g and side s
         ``wall_{s}{g}_left`` / ``wall_{s}{g}_right`` (the two facing walls);
-        ``gap_{s}{g}`` (both walls and the floor between them) and per
+        ``gap_{s}{g}`` (both walls, the floor between them and the blocks' outer faces over those walls) and per
         chamber k ``pocket_{s}{k}`` (all walls of the pocket).
     nodes : dict of str -> ndarray of int
         ``clamp`` (x = 0), ``end`` (x = L), ``symmetry`` (z = 0, 3D only),
@@ -102,6 +102,9 @@ class UnitMesh:
     h: float
     #: facet sets with self-contact: every gap (its two walls and floor) and every pocket (its walls)
     contact_surfaces: list[str] = field(default_factory=list)
+    #: per contact surface the part of each facet: a node never pairs with facets of its own parts
+    #: (a gap's left block, floor, right block; a pocket's walls)
+    contact_parts: dict[str, np.ndarray] = field(default_factory=dict)
     #: chamber -> group name (whole actuator only; empty for the unit)
     chamber_group: tuple[str, ...] = ()
     #: the chain is cut at gap centres (the backbone runs on by half a gap past both end blocks)
@@ -315,6 +318,7 @@ def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tu
             sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yb - tol) & (ys < yp + tol) & in_z
         facets[f"cavity_{side}"] = faces[sel]
     surfaces = []
+    part_of: dict[str, np.ndarray] = {}  # per contact surface, the part (wall, floor, block side) of each facet
     for side, sgn in (("top", 1.0), ("bottom", -1.0)):
         ys = sgn * mid[1]
         for k, (a, b) in enumerate(gaps):
@@ -322,14 +326,22 @@ def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tu
                 sel = (np.abs(mid[0] - x) < tol) & (ys > yb)
                 facets[f"wall_{side}{k}_{name}"] = faces[sel]
             floor = (np.abs(ys - yb) < tol) & (mid[0] > a) & (mid[0] < b)
-            facets[f"gap_{side}{k}"] = np.concatenate([facets[f"wall_{side}{k}_left"], faces[floor],
-                                                       facets[f"wall_{side}{k}_right"]])
+            # the blocks' outer faces over the walls next to the gap: when two blocks meet corner to
+            # corner, each corner presses on the other's outer face, a master surface of its own
+            outer = (np.abs(ys - yt) < tol) & (((mid[0] > a - tf) & (mid[0] < a)) | ((mid[0] > b) & (mid[0] < b + tf)))
+            left_outer = outer & (mid[0] < a)
+            right_outer = outer & (mid[0] > b)
+            parts = [np.concatenate([facets[f"wall_{side}{k}_left"], faces[left_outer]]), faces[floor],
+                     np.concatenate([facets[f"wall_{side}{k}_right"], faces[right_outer]])]
+            facets[f"gap_{side}{k}"] = np.concatenate(parts)
+            part_of[f"gap_{side}{k}"] = np.repeat(np.arange(3), [len(q) for q in parts])
             surfaces.append(f"gap_{side}{k}")
         if end_gaps:  # the end blocks' outer walls and the backbone's top past them: half a gap each
             for name, x, lo, hi in (("first", 0.0, -gap / 2, 0.0), ("last", L, L, L + gap / 2)):
                 wall = (np.abs(mid[0] - x) < tol) & (ys > yb)
                 top = (np.abs(ys - yb) < tol) & (mid[0] > lo) & (mid[0] < hi)
-                facets[f"gap_{side}_{name}"] = faces[wall | top]
+                facets[f"gap_{side}_{name}"] = np.concatenate([faces[wall], faces[top]])
+                part_of[f"gap_{side}_{name}"] = np.repeat([0, 1], [int(wall.sum()), int(top.sum())])
                 surfaces.append(f"gap_{side}_{name}")
     # each pocket's walls (the solid's outward normals point into the pocket); 3D: the half pocket
     # is open at the symmetry plane z = 0
@@ -349,6 +361,7 @@ def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tu
                 walls["side"] = (np.abs(mid[2] - (g["width"] / 2 - ts)) < tol) & in_x & in_y
             name = f"pocket_{side}{k}"
             facets[name] = np.concatenate([faces[sel] for sel in walls.values()])
+            part_of[name] = np.repeat(np.arange(len(walls)), [int(sel.sum()) for sel in walls.values()])
             surfaces.append(name)
     ux = np.unique(np.round(p[0], 9))
     paper = np.abs(p[1]) <= y0 + tol
@@ -374,4 +387,5 @@ def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tu
             facets[f"outer_{side}"] = faces[np.abs(ys - yt) < tol]
         nodes["backbone"] = np.flatnonzero(paper)
     return UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=g, h=float(h), contact_surfaces=surfaces,
-                    chamber_group=tuple(groups or ()), end_gaps=bool(end_gaps), _boundary=faces)
+                    chamber_group=tuple(groups or ()), end_gaps=bool(end_gaps), contact_parts=part_of,
+                    _boundary=faces)

@@ -42,15 +42,17 @@ follower load (a dead couple loses its arm as the face turns) and the solve
 is force-controlled near the free angle, where the unit is softest.
 
 ``end_hold`` (blocked and rotation) chooses the end nodes held plane:
-``face`` (default, the sweeps' blocked moment) the whole end face, ``backbone``
-only the paper and base layers (|y| <= 2.1 mm), the blocks' end walls being
-as free as in case *free*.  Measured on the 2D unit (h = 1 mm, contact;
-``workflow.unit_moment_check``): ``face`` gives a blocked moment 2.5-3.4 times
-the ``backbone`` one, and under rotation its couple collapses and turns
-negative from about 0.1-0.25 of the free angle (the last bottom block, forced
-to turn with the face, is pressed into its neighbour; beyond about 20 deg
-total the solve stalls), whereas ``backbone`` runs from M_b to about 0 at the
-free angle (within 11 % of M_b of a linear spring).
+``face`` (``DEFAULT_END_HOLD``) the whole end face, ``backbone`` only the paper
+and base layers (|y| <= 2.1 mm), the blocks' end walls being as free as in
+case *free*.  The default is chosen by evidence (``workflow.unit_moment_check``):
+against the middle unit of a chain of five chambers under end moments (2D,
+h = 1 mm, 60-180 kPa), the spring theta_f (1 - M / M_b) with the face hold's
+blocked moment has that unit's compliance within 1-9 %, the backbone hold's is
+2.4-5.9 times too compliant, and its blocked ray stalls where the held layers
+meet the free end wall (a singular corner; 117 kPa at h = 1 mm).  The paper
+(Fig. 10) summed sum Fx (y - y_SL) + sum Fy L_R over the reactions at the end
+of the middle chamber; with the end free to slide there is no net force, so
+both terms reduce to our couple about any point.
 """
 
 from __future__ import annotations
