@@ -238,7 +238,13 @@ def wall_pairs(um) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def _fields(um):
-    """FElupe mesh, silicone / paper / pressure-boundary field containers (linked) of a ``UnitMesh``."""
+    """Points and the field containers of a ``UnitMesh``: whole body, silicone, paper, pressure boundary.
+
+    The silicone, paper and boundary containers are linked to the whole body's,
+    which is the unknown of the job: FElupe holds the points of the unknown's
+    mesh that have no cells, so with the silicone's mesh the mid-plane nodes of
+    a paper layer of two or more elements would be held fixed.
+    """
     p = um.mesh.p.T.copy()
     if um.dim == 2:
         t = um.mesh.t.T.copy()  # CCW quads: the same node order in both codes
@@ -249,20 +255,22 @@ def _fields(um):
         kind, region, boundary = "hexahedron", felupe.RegionHexahedron, felupe.RegionHexahedronBoundary
         field = felupe.Field
     mesh = felupe.Mesh(p, t, kind)
+    f_all = felupe.FieldContainer([field(region(mesh), dim=um.dim)])
     f_sil = felupe.FieldContainer([field(region(felupe.Mesh(p, t[um.material == 0], kind)), dim=um.dim)])
     f_pap = felupe.FieldContainer([field(region(felupe.Mesh(p, t[um.material == 1], kind)), dim=um.dim)])
-    f_pap.link(f_sil)
+    f_sil.link(f_all)
+    f_pap.link(f_all)
     mask = np.zeros(len(p), bool)
     mask[np.unique(um.facets["cavity_top"])] = True
     bnd = boundary(mesh, mask=mask, ensure_3d=True) if um.dim == 2 else boundary(mesh, mask=mask)
     if bnd.mesh.cells.shape[0] != um.facets["cavity_top"].shape[0]:
         raise RuntimeError("FElupe's pressure boundary differs from the cavity facets")
     f_bnd = felupe.FieldContainer([field(bnd, dim=um.dim)])
-    f_bnd.link(f_sil)
-    return p, f_sil, f_pap, f_bnd
+    f_bnd.link(f_all)
+    return p, f_all, f_sil, f_pap, f_bnd
 
 
-def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=20, info=None):
+def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=20, info=None, partial=False):
     """Total free bending angle (deg) of the unit in FElupe at each pressure (P_B = 0).
 
     ``um`` a 2D or 3D ``UnitMesh`` (3D: half model, u_z = 0 on z = 0), ``mat``
@@ -272,11 +280,15 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
     fails (the softer Table 5 silicone needs it even without contact).
     ``contact`` (2D only): ``SmoothedGapContact`` on ``wall_pairs(um)`` with
     penalty ``eps`` (MPa/mm; default 100 mu0 / 1 mm as ``workflow.fem``).
-    ``info`` (a dict) receives the wall time (s), the converged increments,
-    the cut-backs and, with contact, the smallest gap (mm) over the substeps.
+    ``partial``: if FElupe gives up (its cut-back cannot recover a substep),
+    return the angles reached and NaN beyond the last converged substep
+    instead of raising.  ``info`` (a dict) receives the wall time (s), the
+    converged increments, the cut-backs, ``status`` (0 converged, 1 gave up),
+    ``reason``, the pressure reached (kPa) and, with contact, the smallest gap
+    (mm) over the substeps.
     """
     t0 = time.perf_counter()
-    p, f_sil, f_pap, f_bnd = _fields(um)
+    p, f_all, f_sil, f_pap, f_bnd = _fields(um)
     umat = felupe.Hyperelastic(felupe.constitution.tensortrax.models.hyperelastic.third_order_deformation,
                                C10=mat["c10"], C01=mat["c01"], C11=0.0, C20=mat["c20"], C30=0.0)
     body = felupe.SolidBodyNearlyIncompressible(umat, f_sil, bulk=mat["bulk"])
@@ -290,14 +302,14 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
         eps = 100.0 * mat["mu0"] / 1.0 if eps is None else float(eps)
         item = SmoothedGapContact(f_sil, p, wall_pairs(um), eps, um.h)
         items.append(item)
-    bounds = {"clamp": felupe.Boundary(f_sil[0], mask=np.isclose(p[:, 0], 0.0))}
+    bounds = {"clamp": felupe.Boundary(f_all[0], mask=np.isclose(p[:, 0], 0.0))}
     if um.dim == 3:
-        bounds["symmetry"] = felupe.Boundary(f_sil[0], mask=np.isclose(p[:, 2], 0.0), skip=(1, 1, 0))
+        bounds["symmetry"] = felupe.Boundary(f_all[0], mask=np.isclose(p[:, 2], 0.0), skip=(1, 1, 0))
     end, prev = um.nodes["backbone_end"], um.nodes["backbone_prev"]
     out = {}
 
     def record(stepnumber, substepnumber, substep):
-        x = p + f_sil[0].values
+        x = p + f_all[0].values
         a, b = x[end].mean(axis=0), x[prev].mean(axis=0)
         out[substepnumber] = -np.degrees(np.arctan2(a[1] - b[1], a[0] - b[0]))
         if contact:
@@ -311,11 +323,21 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
     cutback = felupe.plugins.CutbackPlugin(exceptions=errors)
     # PARDISO returns a perturbed solution for a singular matrix instead of failing: SuperLU with contact
     kwargs = {} if contact or _SPSOLVE is None else {"solver": _SPSOLVE}
-    felupe.Job(steps=[step], callback=record, plugins=[cutback]).evaluate(tol=1e-8, verbose=0, **kwargs)
-    angles = np.array([out[i] for i in range(len(steps))])
+    status, reason = 0, ""
+    try:
+        felupe.Job(steps=[step], callback=record, plugins=[cutback]).evaluate(x0=f_all, tol=1e-8, verbose=0, **kwargs)
+    except felupe.NewtonConvergenceError as exc:
+        if not partial:
+            raise
+        status, reason = 1, str(exc)
+    reached = len(out)  # substeps 0 .. reached - 1 converged
+    angles = np.array([out[i] for i in range(reached)])
+    q = np.asarray(pressures_kpa, float) * 1e-3
+    result = np.where(q <= steps[reached - 1] + 1e-12, np.interp(q, steps[:reached], angles), np.nan)
     if info is not None:
+        info["status"], info["reason"], info["p_reached_kpa"] = status, reason, 1e3 * steps[reached - 1]
         info["wall_time_s"] = time.perf_counter() - t0
         info["increments"] = sum(len(v) for v in cutback.load_factors)
         info["cutbacks"] = int(sum(cutback.cutbacks))
         info["min_gap_mm"] = min(gaps, default=np.inf)
-    return np.interp(np.asarray(pressures_kpa) * 1e-3, steps, angles)
+    return result

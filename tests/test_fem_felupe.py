@@ -83,3 +83,13 @@ def test_free_angle_with_contact_agrees_with_felupe_and_its_own_contact():
     free = _our_angles(um, P_KPA, False)
     assert abs(free[1] / ours[1] - 1) > 0.1, (free, ours)
     assert info["min_gap_mm"] > -0.05
+
+
+def test_paper_of_two_elements_moves_in_felupe():
+    # h = 0.5 mm: two elements through the paper, whose mid-plane nodes have no silicone cell
+    # (FElupe must not hold them); one small load step, 15 kPa
+    um = fem.build_unit_mesh(h=0.5, dim=2)
+    theirs = felupe_free_angles(um, [15.0], fem.material_constants({}), nsteps=1)
+    ours = fem.solve_unit(um, 15.0, 0.0, "free", False, formulation="mixed")
+    assert ours.status == 0
+    assert abs(theirs[0] / ours.bending_angle_total_deg - 1) < 1e-6, (theirs, ours.bending_angle_total_deg)
