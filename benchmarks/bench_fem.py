@@ -6,9 +6,10 @@ cut-backs, the split of the time into the solid's tangent and residual-only
 assemblies, contact, follower pressure, the reduction T^T K T and the linear
 solves (with the number of tangent and residual-only evaluations), the
 peak memory (ru_maxrss of the case's own process), the angle / moment, and
-FElupe's time on the same mesh without contact (2D: the helper of
-tests/test_fem_felupe.py, 60 fixed steps; 3D: the same model here, fixed
-steps).  Each case runs in a fresh process, so its peak memory is its own.
+FElupe's time on the same mesh without contact (the model of
+tests/_felupe_unit.py: equal substeps with FElupe's cut-back; Q1 paper, i.e.
+our ``mixed`` technology, not the default enhanced paper).  Each case runs in
+a fresh process, so its peak memory is its own.
 
 It also gives the mesh convergence of the 3D free angle at 300 kPa with
 contact: generalised Richardson extrapolation from the three 3D meshes
@@ -116,70 +117,21 @@ def _case(args):
     return row
 
 
-def felupe_free_angles_3d(um, pressures_kpa, mat, nsteps: int = 30):
-    """Total free bending angle (deg) of the 3D half unit in FElupe at each pressure (nsteps equal steps).
-
-    The same mesh, Q1 mean-dilatation silicone, neo-Hooke paper, follower
-    pressure on the top cavities, clamp at x = 0 and u_z = 0 on z = 0 as
-    ``workflow.fem``; no contact; PARDISO.
-    """
-    import felupe
-    import pypardiso
-
-    p = um.mesh.p.T.copy()
-    t = um.mesh.t.T[:, [0, 2, 4, 1, 3, 6, 7, 5]].copy()  # scikit-fem -> VTK hexahedron node order
-    mesh = felupe.Mesh(p, t, "hexahedron")
-    sil = felupe.Mesh(p, t[um.material == 0], "hexahedron")
-    pap = felupe.Mesh(p, t[um.material == 1], "hexahedron")
-    f_sil = felupe.FieldContainer([felupe.Field(felupe.RegionHexahedron(sil), dim=3)])
-    f_pap = felupe.FieldContainer([felupe.Field(felupe.RegionHexahedron(pap), dim=3)])
-    f_pap.link(f_sil)
-    mask = np.zeros(len(p), bool)
-    mask[np.unique(um.facets["cavity_top"])] = True
-    bnd = felupe.RegionHexahedronBoundary(mesh, mask=mask)
-    if bnd.mesh.cells.shape[0] != um.facets["cavity_top"].shape[0]:
-        raise RuntimeError("FElupe's pressure boundary differs from the cavity facets")
-    f_bnd = felupe.FieldContainer([felupe.Field(bnd, dim=3)])
-    f_bnd.link(f_sil)
-    umat = felupe.Hyperelastic(felupe.constitution.tensortrax.models.hyperelastic.third_order_deformation,
-                               C10=mat["c10"], C01=mat["c01"], C11=0.0, C20=mat["c20"], C30=0.0)
-    body = felupe.SolidBodyNearlyIncompressible(umat, f_sil, bulk=mat["bulk"])
-    paper = felupe.SolidBody(felupe.NeoHookeCompressible(mu=mat["paper_mu"], lmbda=mat["paper_lambda"]), f_pap)
-    load = felupe.SolidBodyPressure(f_bnd)
-    bounds = {"clamp": felupe.Boundary(f_sil[0], mask=np.isclose(p[:, 0], 0.0)),
-              "symmetry": felupe.Boundary(f_sil[0], mask=np.isclose(p[:, 2], 0.0), skip=(1, 1, 0))}
-    end, prev = um.nodes["backbone_end"], um.nodes["backbone_prev"]
-    out = {}
-
-    def record(stepnumber, substepnumber, substep):
-        x = p + f_sil[0].values
-        a, b = x[end].mean(axis=0), x[prev].mean(axis=0)
-        out[substepnumber] = -np.degrees(np.arctan2(a[1] - b[1], a[0] - b[0]))
-
-    steps = np.linspace(0.0, max(pressures_kpa), nsteps + 1)[1:] * 1e-3
-    step = felupe.Step(items=[body, paper, load], ramp={load: steps}, boundaries=bounds)
-    felupe.Job(steps=[step], callback=record).evaluate(tol=1e-8, verbose=0, solver=pypardiso.spsolve)
-    angles = np.array([out[i] for i in range(len(steps))])
-    return np.interp(np.asarray(pressures_kpa) * 1e-3, steps, angles)
-
-
 def _felupe_case(args):
     """FElupe's free solve without contact on our mesh, in this (fresh) process."""
     dim, h, p, nsteps = args
     sys.path.insert(0, str(ROOT / "tests"))
+    from _felupe_unit import felupe_free_angles
     from workflow import fem
 
     um = fem.build_unit_mesh(h=h, dim=dim)
     mat = fem.material_constants({})
     t0 = time.perf_counter()
-    if dim == 2:
-        from test_fem_felupe import felupe_free_angles
-
-        ang, nsteps = felupe_free_angles(um, [p], mat), 60
-    else:
-        ang = felupe_free_angles_3d(um, [p], mat, nsteps)
-    return {"code": f"felupe ({nsteps} fixed steps)", "dim": dim, "h_mm": h, "h_eff_mm": _mesh_size(um),
-            "case": "free", "contact": False, "wall_time_s": time.perf_counter() - t0, "status": 0, "steps": nsteps,
+    info = {}
+    ang = felupe_free_angles(um, [p], mat, nsteps=nsteps, info=info)
+    return {"code": f"felupe ({nsteps} substeps, cut-back)", "dim": dim, "h_mm": h, "h_eff_mm": _mesh_size(um),
+            "case": "free", "contact": False, "wall_time_s": time.perf_counter() - t0, "status": 0,
+            "steps": info["increments"], "cutbacks": info["cutbacks"],
             "bending_angle_total_deg": float(ang[0]), "bending_angle_deg": float(ang[0]) / 3,
             "ndofs": dim * um.mesh.p.shape[1], "peak_rss_mb": _peak_mb()}
 
@@ -267,8 +219,8 @@ def main():
     ap.add_argument("--h2", type=float, nargs="*", default=None, help="2D element sizes (mm)")
     ap.add_argument("--h3", type=float, nargs="*", default=None, help="3D element sizes (mm)")
     ap.add_argument("--threads", type=int, default=1, help="MKL / BLAS threads per case")
-    ap.add_argument("--felupe-steps-3d", type=int, default=30,
-                    help="FElupe load steps in 3D (10 do not converge at 2 mm)")
+    ap.add_argument("--felupe-steps", type=int, default=20,
+                    help="FElupe substeps (its cut-back subdivides a substep that fails)")
     ap.add_argument("--no-felupe", action="store_true")
     ap.add_argument("--only-3d-free-contact", action="store_true", help="the Richardson solves only")
     ap.add_argument("--tag", default="bench_fem", help="output file stem in benchmarks/out")
@@ -283,8 +235,8 @@ def main():
     jobs = [(_case, (2, h, c, k, a.p)) for h in h2 for c, k in flags]
     jobs += [(_case, (3, h, c, k, a.p)) for h in h3 for c, k in flags]
     if not (a.no_felupe or a.only_3d_free_contact):
-        jobs += [(_felupe_case, (2, h, a.p, 60)) for h in h2]
-        jobs += [(_felupe_case, (3, h, a.p, a.felupe_steps_3d)) for h in h3]
+        jobs += [(_felupe_case, (2, h, a.p, a.felupe_steps)) for h in h2]
+        jobs += [(_felupe_case, (3, h, a.p, a.felupe_steps)) for h in h3]
     OUT.mkdir(parents=True, exist_ok=True)
     rows = []
     for fun, args in jobs:
