@@ -107,7 +107,7 @@ def test_pockets_stay_open_at_300kpa_2d():
     the same check sees the walls pass through each other.
     """
     um = fem.build_unit_mesh(h=1.0, dim=2)
-    res = fem.solve_unit(um, 300.0, 0.0, "free", True)
+    res = fem.solve_unit_from_config({}, 2, 300.0, 0.0, "free", mesh=um)  # with the workflow's restarts
     assert res.status == 0, res.reason
     assert max(h["overlap_depth_mm"] for h in res.history) <= PENETRATION_BOUND_MM
     assert res.max_penetration_mm <= PENETRATION_BOUND_MM
@@ -124,7 +124,7 @@ def test_pockets_stay_open_at_300kpa_2d():
 @pytest.mark.slow
 def test_pockets_stay_open_at_300kpa_3d():
     um = fem.build_unit_mesh(h=2.0, dim=3)
-    res = fem.solve_unit(um, 300.0, 0.0, "free", True)
+    res = fem.solve_unit_from_config({}, 3, 300.0, 0.0, "free", mesh=um, stops=(0.2, 0.6))  # as the unit check
     assert res.status == 0, res.reason
     assert max(h["overlap_depth_mm"] for h in res.history) <= PENETRATION_BOUND_MM
     assert res.max_penetration_mm <= PENETRATION_BOUND_MM

@@ -232,6 +232,10 @@ def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -
     if choice is None:
         h_cfg = dict(act.get("mesh", {})).get(f"h_{model}_mm")
         return act, {"fidelity": "config", "fidelity_reason": f"actuator.mesh.h_{model}_mm = {h_cfg} (fidelity.auto off)"}
+    if model not in [str(m) for m in choice["model_choice"].values]:
+        h_cfg = dict(act.get("mesh", {})).get(f"h_{model}_mm")
+        return act, {"fidelity": "config", "fidelity_reason": f"actuator.mesh.h_{model}_mm = {h_cfg} (no {model} case in "
+                     "fidelity.fem_cases)"}
     row = choice.sel(model_choice=model)
     case = FemCase(model, float(row["chosen_h_mm"]), bool(row["chosen_contact"]))
     return case_actuator(act, case), {"fidelity": case.name, "fidelity_reason": str(row["choice_reason"].values)}

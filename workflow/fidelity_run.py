@@ -120,8 +120,17 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
         worst = (sel["error"] / bound).max("quantity", skipna=True).values
         # contact is part of the physics: cases without it are comparisons, never a choice
         conv = sel["converged"].values.astype(bool) & sel["contact"].values.astype(bool)
-        ch = FD.cheapest_within(f"fem_{model}", names, sel["wall_time_s"].values, worst, 1.0, converged=conv,
-                                unit="x the tolerance")
+        try:
+            ch = FD.cheapest_within(f"fem_{model}", names, sel["wall_time_s"].values, worst, 1.0, converged=conv,
+                                    unit="x the tolerance")
+        except ValueError:
+            # no case with contact reached every point: the finest with contact is used (its sweeps
+            # record each failed sample's status), and the choice says so
+            withc = [n for n, c in zip(names, sel["contact"].values) if bool(c)] or names
+            fine = min(withc, key=lambda n: FD.FemCase.parse(n).h_mm)
+            ch = FD.Choice(f"fem_{model}", fine, f"{fine}: no case with contact reached every study point; the finest "
+                           "with contact taken", float("nan"), float(sel["wall_time_s"].sel(case=fine)), False)
+            log.warning("FE %s: no case with contact reached every study point; %s taken", model, fine)
         case = FD.FemCase.parse(ch.method)
         e = sel["error"].sel(case=ch.method)
         ea = float(e.sel(quantity=[q for q in e["quantity"].values if str(q).startswith("angle")]).max())

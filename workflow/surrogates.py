@@ -248,6 +248,10 @@ def surrogate_cv(
     for fea, resp in responses.items():
         X, Y = training_data(resp)
         log.info("CV %s: %d converged samples of %d, %d folds", fea, X.shape[0], resp.sizes["point"], folds)
+        if X.shape[0] < max(folds, k + 1):
+            raise ValueError(f"{fea} sweep: {X.shape[0]} converged samples of {resp.sizes['point']}, too few for "
+                             f"{folds}-fold cross-validation of a {k}-nearest-neighbour surrogate; the sweep's "
+                             "status variable says where its rays stopped")
         cv = cross_validate(X, Y, regressors=regressors, k=k, folds=folds, random_state=random_state)
         best, score, why = select_regressor(cv, tolerance)
         cv["score"] = score

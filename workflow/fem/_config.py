@@ -11,10 +11,10 @@ import xarray as xr
 
 from ._mesh import build_unit_mesh
 from ._solve import STATUS_FLAGS
-from ._unit import DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
+from ._unit import DEFAULT_CONTACT, DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
 from ..runlog import solved
 
-__all__ = ["layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check", "write_unit_check", "write_deformed_vtu"]
+__all__ = ["DEFAULT_RESTARTS", "layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check", "write_unit_check", "write_deformed_vtu"]
 
 log = logging.getLogger(__name__)
 
@@ -32,21 +32,56 @@ def unit_mesh_from_config(actuator: Mapping, dim: int):
     return build_unit_mesh(actuator.get("geometry"), h=h, dim=dim, **layer_options(actuator))
 
 
+#: Restarts from zero load of a ray that stalls, tried in order (overrides of ``actuator``): a wider
+#: contact regularisation band (0.05, 0.1 mm instead of 0.01 mm) or smaller steps without predictor
+#: often pass a contact event (blocks meeting corner to corner) where the first try cycled. The band
+#: moves the free angle by under 1 % (2D, h = 1 and 2 mm, 60-300 kPa), below the fidelity tolerance.
+DEFAULT_RESTARTS = (
+    {"contact": {"smoothing_mm": 0.05}},
+    {"contact": {"smoothing_mm": 0.1}},
+    {"solver": {"predictor": False, "max_step": 0.02}},
+)
+
+
+def _merged(actuator: Mapping, override: Mapping) -> dict:
+    out = dict(actuator)
+    for key, val in override.items():
+        out[key] = dict(actuator.get(key, {}), **val) if isinstance(val, Mapping) else val
+    return out
+
+
 def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bottom_kpa: float, case: str = "free",
-                           mesh=None, **kwargs) -> UnitResult:
+                           mesh=None, restarts: bool = True, **kwargs) -> UnitResult:
     """``solve_unit`` with geometry, mesh size, material, contact and solver from ``actuator``.
 
-    ``mesh`` (a ``UnitMesh``) can be passed to reuse one across calls.
+    ``mesh`` (a ``UnitMesh``) can be passed to reuse one across calls. A ray
+    that stalls is solved again from zero with each of ``actuator.restarts``
+    (default ``DEFAULT_RESTARTS``) until one reaches the end; the result says
+    which (``attempt``, 0 = as configured, and ``contact_smoothing_mm``). If
+    none does, the attempt that got furthest is returned.
     """
-    contact = dict(actuator.get("contact", {}))
-    enabled = contact.pop("enabled", True)
+    um = mesh if mesh is not None else unit_mesh_from_config(actuator, dim)
     kwargs.setdefault("end_hold", actuator.get("end_hold", DEFAULT_END_HOLD))
     kwargs.setdefault("formulation", actuator.get("formulation", DEFAULT_FORMULATION))
-    return solve_unit(
-        mesh if mesh is not None else unit_mesh_from_config(actuator, dim),
-        p_top_kpa, p_bottom_kpa, case, enabled,
-        material=actuator.get("material"), contact_options=contact, solver=actuator.get("solver"), **kwargs,
-    )
+    tries = [{}] + (list(actuator.get("restarts", DEFAULT_RESTARTS)) if restarts else [])
+    best = None
+    for attempt, override in enumerate(tries):
+        act = _merged(actuator, override)
+        contact = dict(act.get("contact", {}))
+        enabled = contact.pop("enabled", True)
+        if attempt and not enabled and set(override) <= {"contact"}:
+            continue  # without contact a contact-only restart repeats the same solve
+        res = solve_unit(um, p_top_kpa, p_bottom_kpa, case, enabled, material=act.get("material"),
+                         contact_options=contact, solver=act.get("solver"), **kwargs)
+        res.attempt = attempt
+        res.contact_smoothing_mm = float(contact.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
+        if res.status == 0:
+            return res
+        if best is None or res.load_factor > best.load_factor:
+            best = res
+        log.info("%dd %s to (%g, %g) kPa: attempt %d stopped at %.0f %% (%s)", dim, case, p_top_kpa, p_bottom_kpa,
+                 attempt + 1, 100 * res.load_factor, res.reason)
+    return best
 
 
 def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 300.0)):
@@ -75,17 +110,8 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
         dim = int(model[0])
         mesh = unit_mesh_from_config(actuator, dim)
         for k, case in enumerate(cases):
-            # a ray that stalls is restarted from zero with other step control (a different
-            # step sequence often passes a contact event the first one could not)
-            solver = dict(actuator.get("solver", {}))
-            variants = ({}, {"predictor": False}, {"max_step": 0.02, "line_search": not solver.get("line_search", True)})
-            for attempt, variant in enumerate(variants):
-                act = dict(actuator, solver=dict(solver, **variant))
-                res = solve_unit_from_config(act, dim, pmax, 0.0, case, mesh=mesh, stops=tuple(p_top_kpa / pmax),
-                                             keep_displacement=(dim == 3 and case == "free"))
-                if res.status == 0:
-                    break
-                log.info("%s %s: attempt %d stopped at %.1f kPa (%s)", model, case, attempt + 1, res.load_factor * pmax, res.reason)
+            res = solve_unit_from_config(actuator, dim, pmax, 0.0, case, mesh=mesh, stops=tuple(p_top_kpa / pmax),
+                                         keep_displacement=(dim == 3 and case == "free"))
             log.info("%s %s to P_T=%g kPa: status %d (%s), %d iterations, %.1f s", model, case, pmax, res.status,
                      res.reason, res.newton_iterations, res.wall_time_s, extra=solved(res.status != 0))
             for j, p in enumerate(p_top_kpa):

@@ -58,12 +58,20 @@ def _tributary(p: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return nodes, w
 
 
-def _chain_neighbours(facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """2D: per facet (a, b) of an oriented chain, the node before a and the node after b (-1 at a free edge)."""
+def _chain_neighbours(facets: np.ndarray, part: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """2D: per facet (a, b) of an oriented chain, the node before a and the node after b (-1 at a free edge).
+
+    With ``part`` (an id per facet), a neighbour of another part counts as none: the nodal normal at a
+    part's end is its own facet's (a block's corner stays a corner) while the chain stays closed for the
+    facets' parameter ranges.
+    """
     first = {int(a): k for k, a in enumerate(facets[:, 0])}
     second = {int(b): k for k, b in enumerate(facets[:, 1])}
-    prev = np.array([facets[second[int(a)], 0] if int(a) in second else -1 for a in facets[:, 0]], dtype=np.int64)
-    nxt = np.array([facets[first[int(b)], 1] if int(b) in first else -1 for b in facets[:, 1]], dtype=np.int64)
+    same = (lambda k, j: True) if part is None else (lambda k, j: part[k] == part[j])
+    prev = np.array([facets[second[int(a)], 0] if int(a) in second and same(k, second[int(a)]) else -1
+                     for k, a in enumerate(facets[:, 0])], dtype=np.int64)
+    nxt = np.array([facets[first[int(b)], 1] if int(b) in first and same(k, first[int(b)]) else -1
+                    for k, b in enumerate(facets[:, 1])], dtype=np.int64)
     return prev, nxt
 
 
@@ -197,20 +205,28 @@ class ContactPair:
         ``parts``: per surface a part id per facet (or None): see ``_excluded``.
         """
         obj = cls.__new__(cls)
-        slave, area, pools, start = [], [], [], 0
+        slave, area, pools, start, part_ids = [], [], [], 0, []
         for i, f in enumerate(surfaces):
+            # globally unique part ids (a surface without parts is one part)
+            q = np.zeros(f.shape[0], int) if parts is None or parts[i] is None else np.asarray(parts[i], int)
+            part_ids.append(q + (1 + max((int(x.max()) for x in part_ids), default=-1)))
             nd, a = _tributary(p, f)
             excl = _excluded(f, nd, None if parts is None else parts[i])
             allf = np.arange(f.shape[0])
-            pools += [start + np.setdiff1d(allf, sorted(e)) for e in excl]
-            slave.append(nd)
-            area.append(a)
+            pool = [start + np.setdiff1d(allf, sorted(e)) for e in excl]
+            # on a coarse mesh a small surface (a pocket two elements around) can lie wholly next to a node:
+            # such a node has nothing it may touch and is no slave
+            keep = np.array([q.size > 0 for q in pool], bool)
+            pools += [q for q, k in zip(pool, keep) if k]
+            slave.append(nd[keep])
+            area.append(a[keep])
             start += f.shape[0]
         obj._setup(p, np.concatenate(slave), np.concatenate(area), np.concatenate(list(surfaces)), pools, search,
-                   extend, smoothing, smooth_normals, penalty_factor)
+                   extend, smoothing, smooth_normals, penalty_factor, master_part=np.concatenate(part_ids))
         return obj
 
-    def _setup(self, p, slave, area, master_facets, pools, search, extend, smoothing, smooth_normals, penalty_factor):
+    def _setup(self, p, slave, area, master_facets, pools, search, extend, smoothing, smooth_normals, penalty_factor,
+               master_part=None):
         """Common set-up: slave nodes (ns,), their areas, master facets and per slave its facet ids."""
         self.dim = p.shape[0]
         self.penalty_factor = float(penalty_factor)
@@ -220,8 +236,9 @@ class ContactPair:
         self.area = np.asarray(area, float)
         self.master = master_facets
         # per slave the facet ids it may pair with, padded by repeating its first (masked by a large distance)
-        width = max(q.size for q in pools)
-        self._pool = np.stack([np.concatenate([q, np.full(width - q.size, q[0])]) for q in pools])
+        width = max((q.size for q in pools), default=1)
+        self._pool = (np.stack([np.concatenate([q, np.full(width - q.size, q[0])]) for q in pools]) if pools
+                      else np.zeros((0, width), np.int64))
         self._pad = np.where(np.arange(width)[None, :] >= np.array([q.size for q in pools])[:, None], 1e9, 0.0)
         self.search = search
         # allowed parameter range per master facet: [0, 1] (2D) / [-1, 1]^2 (3D), widened at free edges
@@ -231,7 +248,7 @@ class ContactPair:
         if self.dim == 2:
             self.lo = np.where(on_edge[:, 0], -extend, 0.0)
             self.hi = np.where(on_edge[:, 1], 1.0 + extend, 1.0)
-            self.prev, self.next = _chain_neighbours(master_facets)
+            self.prev, self.next = _chain_neighbours(master_facets, master_part)
             if not self.smooth_normals:
                 self.prev[:] = -1
                 self.next[:] = -1
@@ -341,8 +358,11 @@ class ContactPair:
             lo, hi, has_prev, has_next = lim
             xi, n, _ = _segment_2d(X, has_prev, has_next)
             N = np.stack([1.0 - xi, xi, np.zeros_like(xi), np.zeros_like(xi)], axis=1)
-            w = np.where(xi < 0, _window((xi - lo) / np.maximum(-lo, 1e-12)), 1.0)
-            w = w * np.where(xi > 1, _window((hi - xi) / np.maximum(hi - 1.0, 1e-12)), 1.0)
+            # the fade applies only past a free edge (an extension); at an end shared with the next facet
+            # (lo = 0 / hi = 1) a projection a round-off outside still carries the full force, else a slave
+            # sitting on a master node would lose its force whenever the tie between the two facets flips
+            w = np.where((xi < 0) & (lo < 0), _window((xi - lo) / np.maximum(-lo, 1e-12)), 1.0)
+            w = w * np.where((xi > 1) & (hi > 1), _window((hi - xi) / np.maximum(hi - 1.0, 1e-12)), 1.0)
         else:
             ab = np.zeros((X.shape[0], 2))
             for _ in range(10):
@@ -364,8 +384,9 @@ class ContactPair:
             (L,) = lim  # (nc, 2 directions, lo/hi)
             lo, hi = L[..., 0], L[..., 1]
             # the penalty fades to 0 across the widened range past a free edge (continuous as a slave slides off)
-            w = np.prod(np.where(ab > 1, _window((hi - ab) / np.maximum(hi - 1.0, 1e-12)), 1.0)
-                        * np.where(ab < -1, _window((ab - lo) / np.maximum(-1.0 - lo, 1e-12)), 1.0), axis=1)
+            w = np.prod(np.where((ab > 1) & (hi > 1), _window((hi - ab) / np.maximum(hi - 1.0, 1e-12)), 1.0)
+                        * np.where((ab < -1) & (lo < -1), _window((ab - lo) / np.maximum(-1.0 - lo, 1e-12)), 1.0),
+                        axis=1)
         g = np.einsum("ci,ci->c", xs - np.einsum("ca,cai->ci", N, xm), n)
         coef = np.concatenate([np.ones((X.shape[0], 1)), -N], axis=1)
         dg = (coef[:, :, None] * n[:, None, :]).reshape(X.shape[0], -1)

@@ -145,6 +145,8 @@ class UnitResult:
     solve_time_s: float
     ndofs: int
     end_angle_deg: float = 0.0
+    attempt: int = 0  # restart that produced it (solve_unit_from_config; 0 = as configured)
+    contact_smoothing_mm: float = np.nan  # contact regularisation band used (mm)
     history: list = field(default_factory=list)
     displacement: np.ndarray | None = field(default=None, repr=False)
 
