@@ -36,10 +36,11 @@ def _our_angles(um, p, contact, formulation="mixed"):
 def test_wall_pairs_cover_the_contact_surfaces_without_neighbours():
     um = fem.build_unit_mesh(h=1.0, dim=2)
     p = um.mesh.p.T
-    # a gap's U is three straight walls, a pocket's loop four
+    # a gap's surface is five straight walls (the blocks' outer faces over it, its two walls, its
+    # floor), a pocket's loop four
     for name in um.contact_surfaces:
         walls = straight_walls(p, um.facets[name])
-        assert len(walls) == (3 if name.startswith("gap") else 4), name
+        assert len(walls) == (5 if name.startswith("gap") else 4), name
         assert sum(w.shape[0] for w in walls) == um.facets[name].shape[0]
     pairs = wall_pairs(um)
     slaves = np.unique(np.concatenate([s.ravel() for s, _ in pairs]))
@@ -68,18 +69,24 @@ def test_free_angle_3d_agrees_with_felupe_without_contact():
 
 @pytest.mark.slow
 def test_free_angle_with_contact_agrees_with_felupe_and_its_own_contact():
-    # h = 1 mm: at 2 mm neither code reaches 300 kPa; both stall where an outer corner of a bottom
-    # block slides past the end of its neighbour's wall (FElupe's MLS weight fades there, our
-    # master's extension too): FElupe near 140 kPa, ours near 290 kPa
+    # h = 1 mm, each code its own contact on the same surfaces. Since the gaps' surfaces take the
+    # blocks' outer faces (the unpressurised side's blocks meet corner to corner from about 15 kPa),
+    # FElupe's MLS contact gives up near 110 kPa (20 or 60 substeps alike) and ours (mixed, no
+    # restarts) past 180 kPa: compared where both got, measured 31.15 vs 30.86 deg total at 60 kPa
     um = fem.build_unit_mesh(h=1.0, dim=2)
     mat = fem.material_constants({})
     info = {}
-    theirs = felupe_free_angles(um, P_KPA, mat, contact=True, info=info)
-    ours = _our_angles(um, P_KPA, True)
-    err = np.abs(ours - theirs) / abs(theirs[-1])
+    theirs = felupe_free_angles(um, P_KPA, mat, contact=True, info=info, partial=True)
+    res = fem.solve_unit(um, float(P_KPA[-1]), 0.0, "free", True, formulation="mixed", stops=tuple(P_KPA / P_KPA[-1]))
+    at = {round(h["p_top_kpa"], 6): h["bending_angle_total_deg"] for h in res.history}
+    ours = np.array([at.get(round(q, 6), np.nan) for q in P_KPA])
+    both = np.isfinite(theirs) & np.isfinite(ours)
+    assert both[0] and np.isfinite(ours[1]), (ours, theirs, info.get("reason"))
+    k = np.flatnonzero(both)[-1]
+    err = np.abs(ours[both] - theirs[both]) / abs(ours[k])
     assert np.all(err < 0.05), (ours, theirs, err)
     # contact acts: the top blocks' walls push each other apart (more bending), the bottom blocks
-    # meeting hold it back; at 300 kPa the two nearly cancel (5 %), so the check is at 180 kPa
+    # meeting hold it back; at 180 kPa the difference is well above 10 %
     free = _our_angles(um, P_KPA, False)
     assert abs(free[1] / ours[1] - 1) > 0.1, (free, ours)
     assert info["min_gap_mm"] > -0.05

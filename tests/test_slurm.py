@@ -123,7 +123,10 @@ def _rule_of(comment: str) -> str:
 def test_smoke_workflow_through_slurm(slurm_cluster, tmp_path):
     copy_workflow(tmp_path, extra=("profiles",))
     local = local_overrides(tmp_path)
-    cfgs = ["--configfile", "config/smoke.yaml", str(local)]
+    # fidelity.auto off: the sweep shard then depends on the config alone, not on the FE study (which the
+    # smoke run of tests/test_workflow.py covers), so the cluster runs a handful of short jobs
+    (tmp_path / "config" / "slurm_test.yaml").write_text(yaml.safe_dump({"fidelity": {"auto": False}}))
+    cfgs = ["--configfile", "config/smoke.yaml", str(local), "config/slurm_test.yaml"]
 
     # targets before --configfile, which takes every following argument as a file
     dry = run_snakemake(tmp_path, "-n", *SLURM_TARGETS, *cfgs)
