@@ -1,4 +1,4 @@
-# Stage actuator (issue 4): nonlinear FEA of the three-chamber PNA unit.
+# Stage actuator: nonlinear FEA of the three-chamber PNA unit.
 # Science in workflow/fem (scikit-fem).
 
 
@@ -20,7 +20,7 @@ rule unit_check:
         "../workflow/scripts/unit_check.py"
 
 
-# Unit under an external end moment (issue 5 item 4, CLARIFICATIONS 6): FEA
+# Unit under an external end moment: FEA
 # couples at prescribed end rotations against workflow/unit_model.py.
 rule unit_moment_check:
     input:

@@ -1,4 +1,4 @@
-# Stage cascade (issue 6): per-patient pressure plans on the reduced-order
+# Stage cascade: per-patient pressure plans on the reduced-order
 # finger-actuator model, and their comparison with the paper's Tables 8 and 10.
 
 

@@ -50,18 +50,18 @@ def get_final_output():
     out += ["results/validation/musculoskeletal.nc", "results/validation/musculoskeletal.png"]
     if config["tracking"]["enabled"]:
         out += expand("results/tracking/{patient}.json", patient=PATIENTS)
-    # Nonlinear FEA of the PNA unit (issue 4).
+    # Nonlinear FEA of the PNA unit.
     out += ["results/actuator/unit_check.nc", "results/actuator/unit_3d_300kpa.vtu"]
-    # Pressure sweeps, surrogates and the 2D-to-3D mapping (issue 5).
+    # Pressure sweeps, surrogates and the 2D-to-3D mapping.
     out += expand("results/actuator/response_{fea}.nc", fea=["2d", "3d"])
     out += expand("results/actuator/surrogate_{fea}.joblib", fea=["2d", "3d"])
     out += ["results/actuator/surrogate_cv.nc", "results/actuator/mapping_2d3d.nc"]
     # The unit under an external end moment: FEA at prescribed end rotations vs the unit model.
     out += ["results/actuator/unit_moment_check.nc"]
-    # Cascade plans per patient and their validation against Tables 8 and 10 (issue 6).
+    # Cascade plans per patient and their validation against Tables 8 and 10.
     out += expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS)
     out += ["results/validation/cascade.nc"]
-    # The validation patient's plans checked by 2D FEA of the whole actuator on the finger (issue 9).
+    # The validation patient's plans checked by 2D FEA of the whole actuator on the finger.
     # Its finger section comes from the authors' section points: without them the check is left out, and said so.
     vp = config["cascade"]["validation_patient"]
     # ... and its stand-alone whole actuators in 2D and 3D (Fig. 22; needs no finger).
@@ -69,9 +69,9 @@ def get_final_output():
     if Path(config["cascade"]["section_points"]).is_file():
         out += [f"results/patients/{vp}/fea_check.nc"]
     else:
-        logger.warning(f"FEA check (issue 9) left out: finger section points {config['cascade']['section_points']} "
+        logger.warning(f"FEA check left out: finger section points {config['cascade']['section_points']} "
                        "not found (set cascade.section_points)")
-    # Stability maps, speed against accuracy and the report's plots and tables (issue 7).
+    # Stability maps, speed against accuracy and the report's plots and tables.
     out += ["results/stability/stability.nc", "results/musculoskeletal/moment_angle.png"]
     out += ["results/benchmarks/speed_accuracy.nc", "results/report/speed_accuracy.html",
             "results/report/fidelity_choices.html"]
@@ -112,7 +112,7 @@ def get_patient(wildcards):
     return config["patients"][wildcards.patient]
 
 
-# --- Stage surrogates (issue 5): sweep shards ---------------------------------
+# --- Stage surrogates: sweep shards ---------------------------------
 def get_sweep_params(wildcards):
     """Param function: one FE model's sweep config (p_max_kpa, n_ratios, n_pressures, n_shards)."""
     return config["sweep"][wildcards.fea]
@@ -130,7 +130,7 @@ def get_sweep_shards(wildcards):
     return expand("results/actuator/sweep/{fea}/shard{shard}.nc", fea=wildcards.fea, shard=range(n))
 
 
-# --- Stage cascade (issue 6) ----------------------------------------------------
+# --- Stage cascade ----------------------------------------------------
 def get_unit_response():
     """Input: the surrogate the cascade plans with (config cascade.surrogate)."""
     return f"results/actuator/surrogate_{config['cascade']['surrogate']}.joblib"
@@ -163,7 +163,7 @@ def get_validation_plans(wildcards):
     return out
 
 
-# --- Stage FEA check (issue 9) -------------------------------------------------
+# --- Stage FEA check -------------------------------------------------
 def get_fea_exercises():
     """The exercises the FEA check runs (config fea_check.exercises, else all)."""
     return list(config["fea_check"]["exercises"] or config["exercises"])
@@ -180,7 +180,7 @@ def get_fea_check_slice(wildcards):
     return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": config["fea_check"]}
 
 
-# --- Stage fidelity (issue 7 items 1 and 3) -----------------------------------
+# --- Stage fidelity -----------------------------------
 FEM_CASES = [c.name for c in fidelity.fem_cases(config["fidelity"]["fem_cases"])]
 
 

@@ -1,4 +1,4 @@
-# Stage FEA check (issue 9): every plan checked by a 2D plane-strain FEA of the
+# Stage FEA check: every plan checked by a 2D plane-strain FEA of the
 # whole actuator strapped to the patient's finger (paper Fig. 18-21), and the
 # stand-alone whole actuator in 2D and 3D (Fig. 22). Science in
 # workflow/fea_check.py, workflow/fea_model.py, workflow/fea_standalone.py and

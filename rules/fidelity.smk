@@ -1,4 +1,4 @@
-# Stage fidelity (issue 7 items 1 and 3): speed against accuracy of every
+# Stage fidelity: speed against accuracy of every
 # fidelity the workflow offers, and, with fidelity.auto on, the cheapest one
 # that meets the stated tolerance per stage (the sweeps and the unit check take
 # the FE mesh chosen here, the patients' loads the response surfaces or direct

@@ -1,4 +1,4 @@
-# Stage opensim: the generated OpenSim finger model (issue 3), scaled per CCD run
+# Stage opensim: the generated OpenSim finger model, scaled per CCD run
 # with OpenSim's own scaling and sampled into moment-angle curves; the merged file
 # becomes results/musculoskeletal/moments.nc when musculoskeletal.backend = opensim.
 

@@ -1,4 +1,4 @@
-# Stage report (issue 7 item 4): what `snakemake --report report.html` shows
+# Stage report: what `snakemake --report report.html` shows
 # beyond the stages' own plots -- the moment-angle curves and the tables (one
 # small HTML page each, shown inline). Science-free: workflow/report_tables.py
 # and workflow/plots_report.py only reformat datasets.

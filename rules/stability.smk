@@ -1,4 +1,4 @@
-# Stage stability (issue 7 item 2): where each method fails or degrades. Two
+# Stage stability: where each method fails or degrades. Two
 # small FE studies of the 2D unit (extra rays by mesh, contact and formulation;
 # locking against K/mu0) and the maps built from the sweeps, the unit check,
 # the surrogates' sampled region, the patients' coded levels and their plans.

@@ -1,4 +1,4 @@
-# Stage surrogates (issue 5): pressure sweeps of the FE unit models (sharded,
+# Stage surrogates: pressure sweeps of the FE unit models (sharded,
 # resumable), surrogate cross-validation and fit, 2D-to-3D pressure mapping.
 # Science in workflow/sweep.py, surrogates.py, mapping.py, plots_actuator.py.
 

@@ -6,7 +6,7 @@ The paper's reduced-order setup (section 3.1, Fig. 15-16, Tables 7-8), made a
 static equilibrium that can be solved for any pressures:
 
 * **Actuator**: ``N`` units of backbone length ``L_R = depth + gap`` (7.8 mm,
-  CLARIFICATIONS 1) in four groups LA_CMC, LA_MCP, LA_PIP, LA_DIP, each with its
+  Table 6) in four groups LA_CMC, LA_MCP, LA_PIP, LA_DIP, each with its
   own top/bottom pressures.  Unit count rule (our reading of Fig. 16):
   ``n_CMC = round(cmc_length_fraction * L3MC / L_R)`` (over the hand, default
   half the metacarpal), ``n_MCP = round(L3PP / L_R)``,
@@ -39,7 +39,7 @@ Planning: per exercise, the moments the actuator must supply at the target pose
 follow directly (``m*_X = spring_X(theta*_X) - G_X(theta*)``, the paper's Table 7
 logic).  Per span, a grid search (no gradients, so piecewise-constant
 surrogates such as KNN work) finds the pressures of least sum of squares
-(CLARIFICATIONS 16) whose bend under ``m*_X`` lies within ``tol - margin`` of the
+whose bend under ``m*_X`` lies within ``tol - margin`` of the
 target; the coupled forward model then checks the pose, the angle tolerance and
 the active safety limits (``|m_X| <= limit_X``), halving the span goal when the
 pose drifts out.  ``P_CMC`` may be tied to ``P_MCP`` as in all the paper's plans.
@@ -101,7 +101,7 @@ STATUS_FLAGS = {0: "converged", 1: "not_converged", 2: "non_finite"}
 
 
 class UnitResponse(Protocol):
-    """What the cascade needs from the actuator surrogate (issue 5)."""
+    """What the cascade needs from the actuator surrogate."""
 
     def angle_deg(self, p_top_kpa, p_bottom_kpa, m_ext_nm): ...
 
@@ -133,7 +133,7 @@ def unit_counts(segment_lengths_mm: Sequence[float], unit_length_mm: float,
 def unit_section(dims_mm: Mapping[str, float]) -> dict[str, float]:
     """Volumes (mm^3) of one unit and its bottom-side thickness (mm).
 
-    Per side (CLARIFICATIONS 2): base layer ``bot_layer`` over the unit length
+    Per side: base layer ``bot_layer`` over the unit length
     ``depth + gap``, one block ``depth x width x height`` with an air pocket
     ``ch_depth x ch_width x ch_height``; both sides plus the paper layer.  The
     silicone between blocks above the base layer is left out (the gap is open).
@@ -691,7 +691,7 @@ def patient_finger(patient: Mapping[str, Any], loads, moments, ccd, *, cascade_c
     ``loads``, ``moments``, ``ccd``: the datasets of ``joint_loads.nc``,
     ``moments.nc`` and ``ccd.nc``; ``cascade_cfg`` the config's ``cascade``
     section (densities, gravity, section points).  Shared by the planning
-    and the FEA check (issue 9), so both see the same finger.
+    and the FEA check, so both see the same finger.
     """
     from workflow import finger as F
 
@@ -732,7 +732,7 @@ def patient_cascade(finger: Finger, unit: Any, cascade_cfg: Mapping[str, Any],
     """The actuator laid on ``finger`` as the config's ``cascade`` section says (densities, unit counts, straps).
 
     ``units_per_group`` (e.g. a plan's) overrides the config's counts.  Shared
-    by the planning and the FEA check's correction step (issue 9).
+    by the planning and the FEA check's correction step.
     """
     c, d = cascade_cfg, cascade_cfg["densities"]
     return build_cascade(
@@ -839,7 +839,7 @@ def write_cascade_plan(
                               "planning_wall_time_s": round(time.perf_counter() - t0, 3),
                               "p_limit_kpa": limit.kpa, "p_limit_source": limit.source, **dict(notes or {})})
     if sampled_region is not None:
-        # the surrogate is an extrapolation outside its samples (issue 7 item 2): flag, do not stop
+        # the surrogate is an extrapolation outside its samples: flag, do not stop
         from workflow.stability import flag_pressure_table
 
         ds["pressure_in_sampled_region"], msgs = flag_pressure_table(ds["pressure_kpa"], sampled_region,

@@ -113,7 +113,7 @@ def coded_levels(
     anthropometry: Mapping[str, Mapping[str, float]],
     coded_unit_sd: float = 1.0,
 ) -> dict[str, float]:
-    """Coded levels from finger measurements (CLARIFICATIONS 11).
+    """Coded levels from finger measurements.
 
     Per dimension, the mean over the given codes of (m - mean) / (u * SD).
     A dimension without any measurement stays at 0 (the population mean).

@@ -1,4 +1,4 @@
-"""FEA check of every planned exercise (issue 9, paper section 3.2, Fig. 18-21).
+"""FEA check of every planned exercise (paper section 3.2, Fig. 18-21).
 
 Per patient: the whole actuator of the plan (``units_per_group``) strapped to
 the planar finger (:mod:`workflow.fea_model`), gravity first (one solve,
@@ -6,7 +6,7 @@ shared by the exercises), then each exercise's planned pressures ramped from
 zero.  A point that does not converge is kept with its last converged load
 factor (``load_factor`` < 1, ``status`` > 0) and measured there.
 
-Pressures.  The 2D section is stiffer than the 3D actuator (CLARIFICATIONS 7,
+Pressures.  The 2D section is stiffer than the 3D actuator (
 paper section 3.2): when the plan was made with the 3D surrogate, each
 (P_T, P_B) pair is scaled to the 2D pair of the same ratio and the same free
 angle with the 2D-to-3D mapping (:func:`workflow.mapping.map_pairs`), as the

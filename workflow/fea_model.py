@@ -1,4 +1,4 @@
-"""The planar finger + whole-actuator FE model of a patient (issue 9), from the plan's finger.
+"""The planar finger + whole-actuator FE model of a patient, from the plan's finger.
 
 Builds the inputs of :mod:`workflow.fem`'s coupled model from the same objects
 the plan uses (:func:`workflow.cascade.patient_finger`, the plan's

@@ -1,4 +1,4 @@
-"""Stand-alone whole actuators at the plan's pressures, 2D against 3D (issue 9 item 6, paper Fig. 22).
+"""Stand-alone whole actuators at the plan's pressures, 2D against 3D (paper Fig. 22).
 
 The actuator of the plan (``units_per_group``), hand end clamped, no finger,
 no gravity, each exercise's pressures ramped from zero, in up to three models:

@@ -1,4 +1,4 @@
-"""One FE unit fidelity of the speed-accuracy study (issue 7): the unit check at one mesh and contact switch.
+"""One FE unit fidelity of the speed-accuracy study: the unit check at one mesh and contact switch.
 
 Its own module (and rule input) so that a change to how the study is judged
 (:mod:`workflow.fidelity_run`) does not rerun minutes of FEA.  Units: kPa,

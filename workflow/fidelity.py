@@ -1,4 +1,4 @@
-"""Speed against accuracy, and the cheapest fidelity that meets a tolerance (issue 7 items 1 and 3).
+"""Speed against accuracy, and the cheapest fidelity that meets a tolerance.
 
 Pure functions on small tables; the FE solves, surrogate fits and OpenSim
 samples that feed them live in :mod:`workflow.fidelity_run`.

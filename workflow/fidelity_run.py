@@ -1,4 +1,4 @@
-"""File-level entry points of the fidelity stage (issue 7 items 1 and 3).
+"""File-level entry points of the fidelity stage.
 
 * :func:`write_fem_choice` -- the FE unit cases (:mod:`workflow.fem_study`) against the finest converged one of
   their model, and the cheapest case per model within the tolerance (what the

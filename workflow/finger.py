@@ -2,7 +2,7 @@
 
 The finger lies in its sagittal plane.  Coordinates: ``x`` along the finger
 from the MCP joint centre towards the tip, ``y`` dorsal.  The hand is
-horizontal, palm down (CLARIFICATIONS 19), so gravity points along ``-y`` and
+horizontal, palm down, so gravity points along ``-y`` and
 flexes the finger.  A joint angle is positive in flexion: the distal segment
 turns clockwise in this frame.  The metacarpal is fixed (it is the hand).
 
@@ -130,7 +130,7 @@ class JointSpring:
     """Passive torsional spring of one joint: moment (N m) against angle (deg).
 
     ``moment_nm(angle)`` is the flexion moment a device must apply to hold the
-    joint at ``angle`` (CLARIFICATIONS 14), i.e. the spring's restoring moment.
+    joint at ``angle``, i.e. the spring's restoring moment.
     It is zero at 0 deg by definition and must not decrease with the angle.
     """
 
@@ -268,7 +268,7 @@ def patient_dimensions_mm(
 ) -> dict[str, float]:
     """Every Table 2 measure of a patient, mm.
 
-    ``mean + coded[dim] * coded_unit_sd * sd`` per code (CLARIFICATIONS 11: one
+    ``mean + coded[dim] * coded_unit_sd * sd`` per code (one
     coded unit is one SD of each matching measure), with measured values, where
     given, taking precedence.  ``coded`` maps ``depth``/``length``/``breadth``
     to coded levels.
@@ -479,7 +479,7 @@ def springs_from_loads(
             sel = np.isfinite(cm) & (ca > 0)
             # The sampled moment at 0 deg can be non-zero (muscle tone of the
             # passive activation); the spring is zero at 0 deg by definition
-            # (CLARIFICATIONS 14), so the curve is taken relative to it.
+            # (the moment at a 0-deg target), so the curve is taken relative to it.
             at0 = np.isfinite(cm) & (np.abs(ca) < 1e-9)
             cm0 = float(cm[at0][0]) if at0.any() else 0.0
             if np.count_nonzero(sel) >= 3:

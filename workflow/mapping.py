@@ -1,4 +1,4 @@
-"""2D -> 3D pressure mapping (paper section 3.2, Fig. 17; CLARIFICATIONS 7).
+"""2D -> 3D pressure mapping (paper section 3.2, Fig. 17).
 
 For a 3D pressure pair P = (P_T, P_B) with 3D free angle theta_3D(P), the 2D pair
 is s * P, where the scale s > 0 solves
@@ -163,7 +163,7 @@ def mapping_dataset(
     )
     ds.attrs["p_max_2d_kpa"] = float(p_max_2d_kpa)
     ds.attrs["p_max_3d_kpa"] = float(p_max_3d_kpa)
-    ds.attrs["method"] = "scale s with theta_2D(s P_T, s P_B) = theta_3D(P_T, P_B), bracketing + Brent (CLARIFICATIONS 7)"
+    ds.attrs["method"] = "scale s with theta_2D(s P_T, s P_B) = theta_3D(P_T, P_B), bracketing + Brent"
     return ds
 
 

@@ -1,4 +1,4 @@
-"""Speed against accuracy chart (issue 7 item 1), matplotlib Agg."""
+"""Speed against accuracy chart, matplotlib Agg."""
 
 from __future__ import annotations
 

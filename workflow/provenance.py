@@ -253,7 +253,7 @@ def code_files(*modules: str) -> list[str]:
     """Source files a rule's ``workflow`` modules run, for rule inputs.
 
     Listing them as inputs makes Snakemake rerun a rule when the science it
-    calls changes (CLARIFICATIONS 20).  ``modules`` are dotted names relative
+    calls changes.  ``modules`` are dotted names relative
     to ``workflow`` (e.g. ``"doe"``, ``"fem"``: a package means its
     ``__init__``); each brings the package modules it imports, transitively
     (found by parsing, so lazy imports inside functions count), and the

@@ -1,4 +1,4 @@
-"""Tables of the run report (issue 7 item 4): datasets -> pandas DataFrames -> standalone HTML pages.
+"""Tables of the run report: datasets -> pandas DataFrames -> standalone HTML pages.
 
 Snakemake's HTML report shows a ``.html`` result inline, so each table is
 written as a small self-contained page (`html_page`).  One function per

@@ -1,4 +1,4 @@
-"""Stability maps: where each method of the workflow fails or degrades (issue 7 item 2).
+"""Stability maps: where each method of the workflow fails or degrades.
 
 Five maps, each a function of datasets the workflow already writes, plus two
 small FE studies of their own:

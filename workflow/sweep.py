@@ -26,7 +26,7 @@ The solver is injected: any callable
 with ``direction = (p_top_kpa, p_bottom_kpa)`` at s = 1 and one sample per
 requested scale, in order.  ``status`` uses `STATUS_FLAGS` (0 = converged);
 angles are the free bending angle per unit (deg), moments the blocked moment
-per unit (N m), both over the actuator's full width (CLARIFICATIONS 1).
+per unit (N m), both over the actuator's full width.
 If the callable accepts a ``progress`` keyword it is passed a function
 ``progress(n_done)`` to call after each sample it finishes, for the log.
 """

@@ -1,4 +1,4 @@
-"""Run ledger with MLflow tracking (CLARIFICATIONS 23).
+"""Run ledger with MLflow tracking.
 
 One MLflow run per workflow run and patient: params = the patient's config
 slice and coded levels, metrics = the headline figures found in ``results/``,

@@ -1,6 +1,6 @@
 """A unit's bending angle under an external end moment, and inverse pressure queries.
 
-Model (CLARIFICATIONS 1, 6).  At pressures P = (P_T, P_B) a unit (one chamber)
+Model.  At pressures P = (P_T, P_B) a unit (one chamber)
 has two measured ends of its moment-angle curve: the free bending angle
 theta_f(P) (no end moment) and the blocked moment M_b(P) (the end couple that
 holds its angle at zero).  Between them the unit is modelled as a torsional
@@ -19,7 +19,7 @@ spring with stiffness k(P) = M_b(P) / theta_f(P), in N m per degree:
   ``theta_s`` (deg) is a fixed angle scale (the largest free angle of the
   sweep) that keeps the term regular where theta_f -> 0.  ``c`` is meant to be
   calibrated with `fit_shape` against FEA runs at prescribed end moments, and
-  the model checked with `verify` (issue 5 item 4).  Until such runs exist,
+  the model checked with `verify`.  Until such runs exist,
   c = 0.
 * Outside 0 <= M/M_b <= 1 the model is an extrapolation of the spring.
 * Near P_T = P_B both theta_f and M_b vanish and their ratio is ill-conditioned.

@@ -2,12 +2,12 @@
 
 Per pressure (eight per exercise) the absolute error in kPa and the relative
 error where the reference is at least ``rel_floor_kpa`` (10 kPa,
-CLARIFICATIONS 17); the exercises we reach against each of the paper's three
-sets separately (CLARIFICATIONS 18): planned in 3D (Table 8: all five), reached
+by default); the exercises we reach against each of the paper's three
+sets separately: planned in 3D (Table 8: all five), reached
 in its 2D finger-actuator FEA (TGE1-3), reached on the dummy finger (Table 10:
 TGE1-2).  Agreement with Table 8 is indicative only: the paper summed unit
-moments along the chain (CLARIFICATIONS 16), and Table 10 was measured on a PLA
-dummy finger (CLARIFICATIONS 17).
+moments along the chain, and Table 10 was measured on a PLA
+dummy finger.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from workflow.cascade import PRESSURE_NAMES
 __all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "compare_unit_moments",
            "write_cascade_validation", "plot_validation"]
 
-#: Exercises the paper reached, per set (CLARIFICATIONS 18).
+#: Exercises the paper reached, per set.
 PAPER_REACHED: Mapping[str, Sequence[str]] = {
     "planned_3d": ("TGE1", "TGE2", "TGE3", "TGE4", "TGE5"),
     "fea_2d": ("TGE1", "TGE2", "TGE3"),
@@ -102,7 +102,7 @@ def compare_unit_moments(plan: xr.Dataset, table07: str | Path) -> xr.Dataset:
 
     Ours: ``required_moment_nm`` of the joint whose span holds the group (CMC
     and MCP: MCP).  The paper's came from tip-force measurements divided over
-    eight chambers (CLARIFICATIONS 10), so only signs and ordering compare.
+    eight chambers, so only signs and ordering compare.
     """
     from workflow.cascade import GROUPS, SPANS
 

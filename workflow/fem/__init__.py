@@ -1,4 +1,4 @@
-"""Nonlinear FEA of the bi-directional PNA unit (scikit-fem, issue 4).
+"""Nonlinear FEA of the bi-directional PNA unit (scikit-fem; paper section 3.1).
 
 Compact public API (like a FElupe job)::
 
@@ -7,7 +7,7 @@ Compact public API (like a FElupe job)::
     res = fem.solve_unit(mesh, p_top_kpa=300, p_bottom_kpa=0, case="free", contact=True)
     res.bending_angle_deg, res.status, res.history   # one dict per load step
 
-Sweeps along a ray p = s (p_top, p_bottom), s in (0, 1] (issue 5): one call per
+Sweeps along a ray p = s (p_top, p_bottom), s in (0, 1]: one call per
 ray and case; every accepted load step is a sample in ``res.history`` (keys
 ``p_top_kpa``, ``p_bottom_kpa``, ``bending_angle_deg``, ``bending_moment_nm``,
 ``max_penetration_mm``, ``iterations``, ``wall_time_s``); ``stops`` makes the
@@ -18,7 +18,7 @@ steps land on given s.  With the config section::
 A stalled ray returns ``status`` > 0 with the last converged ``load_factor``.
 
 Case ``rotation`` holds the right end at a prescribed inclination and measures
-the couple (the moment-angle curve between free and blocked; issue 5 item 4)::
+the couple (the moment-angle curve between free and blocked)::
 
     res = fem.solve_unit(mesh, 180, 0, case="rotation", end_angle_deg=30.0, end_hold="backbone")
 

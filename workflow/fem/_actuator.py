@@ -1,4 +1,4 @@
-"""The whole cascaded actuator (issue 9): group pressures, stand-alone solve, backbone curve.
+"""The whole cascaded actuator: group pressures, stand-alone solve, backbone curve.
 
 The actuator is the unit model's chain with ``sum(units_per_group)`` chambers
 (``build_actuator_mesh``): same materials (``material_constants``), follower

@@ -1,4 +1,4 @@
-"""Whole actuator strapped to the planar finger (issue 9, paper Fig. 18-21), plane strain.
+"""Whole actuator strapped to the planar finger (paper Fig. 18-21), plane strain.
 
 One mesh holds both bodies: the actuator (``build_actuator_mesh``, shifted so
 that its bottom outer face lies on the finger's dorsal skin) and the finger

@@ -1,4 +1,4 @@
-"""Planar finger for the whole-actuator check (issue 9): mesh, hinges, straps, dead loads.
+"""Planar finger for the whole-actuator check: mesh, hinges, straps, dead loads.
 
 Mesh.  Each phalanx (PP, MP, DP) is its own body: a structured quadrilateral
 grid mapped between five profile lines sampled along the segment (palmar

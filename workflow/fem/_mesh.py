@@ -1,6 +1,6 @@
 """Structured meshes of the three-chamber PNA unit (Table 6 geometry).
 
-Geometry (CLARIFICATIONS 2), lengths in mm, x along the actuator, y across the
+Geometry, lengths in mm, x along the actuator, y across the
 paper layer (height), z across the width:
 
 * the strain-limiting paper layer, ``paper_width`` thick, centred on y = 0;
@@ -28,7 +28,7 @@ they are much flatter (parasitic shear), and elements half as tall as long
 keep the layered cantilever within 2 % of beam theory
 (``tests/test_fem_beam.py``).
 
-The whole actuator (issue 9) is the same chain with ``sum(units_per_group)``
+The whole actuator is the same chain with ``sum(units_per_group)``
 chambers: ``build_actuator_mesh`` adds per-group cavity facet sets
 (``cavity_top_{group}`` / ``cavity_bottom_{group}``), the outer faces of the
 two sides and the backbone nodes, so that each group gets its own pressures.

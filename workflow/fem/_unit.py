@@ -1,6 +1,6 @@
 """The three-chamber unit model: free bending angle and blocked moment.
 
-Boundary conditions (CLARIFICATIONS 1): the left end face (x = 0) is clamped.
+Boundary conditions: the left end face (x = 0) is clamped.
 *free*: the right end is free; the bending angle is the rotation of the
 strain-limiting backbone at the right end, from the direction of the paper
 layer's last element column (mean position of its paper nodes at x = L minus
@@ -19,7 +19,7 @@ angle / n_chambers; the blocked moment is the same in every chamber and is
 not divided.  Full width: 2D values per mm x ``width``; 3D half model x 2.
 3D adds the symmetry condition u_z = 0 on z = 0.
 
-*rotation* (CLARIFICATIONS 6, issue 5 item 4): the right end face is held
+*rotation*: the right end face is held
 plane at a prescribed total inclination ``end_angle_deg`` (relative to the
 clamp, positive = the sense of P_T bending) while free to slide axially and
 sideways, the generalisation of *blocked* (inclination 0).  Implementation:

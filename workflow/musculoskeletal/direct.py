@@ -4,7 +4,7 @@ The reference model is scaled to the patient's coded levels by the same law
 as the CCD runs (:func:`workflow.doe.scale_factors`) and sampled at the
 exercises' target angles: what the response surfaces approximate, at the cost
 of an OpenSim model build and a few equilibria (about 2 s) instead of a
-polynomial (milliseconds).  Used by the fidelity study (issue 7) and, where
+polynomial (milliseconds).  Used by the fidelity study and, where
 the response surfaces are not trusted, by the patient's loads.
 
 Moments in N m (the flexion moment a device applies to hold the joint, as

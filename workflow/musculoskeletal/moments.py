@@ -2,7 +2,7 @@
 
 ``moment_nm`` (run, finger, joint, angle_deg, activation) is the flexion moment,
 N m, that an external device must apply to hold the joint at ``angle_deg`` with
-the other joints of the finger at 0 deg (CLARIFICATIONS 14).  A *response* is one
+the other joints of the finger at 0 deg.  A *response* is one
 (finger, activation, joint, angle) cell, named as in the authors' export:
 ``F3_P_MCP_90`` = middle finger, passive (activation 0.01), MCP at 90 deg.
 """
@@ -69,7 +69,7 @@ def response_angles(exercises: Mapping[str, Mapping[str, float]]) -> dict[str, d
 
     Passive: every nonzero target angle of the exercises (at 0 deg the passive
     moment is 0 by definition).  Active: the joint's largest target angle, where
-    the safety limit is read (CLARIFICATIONS 14).
+    the safety limit is read.
     """
     out: dict[str, dict[str, list[float]]] = {"P": {}, "A": {}}
     for joint in JOINTS:

@@ -1,4 +1,4 @@
-"""OpenSim backend of the joint moments (issue 3): scale the generated finger, sample its moments.
+"""OpenSim backend of the joint moments: scale the generated finger, sample its moments.
 
 For each finger, joint and angle on a grid over the joint's range (the other
 joints of the finger at 0 deg) and each activation (0.01 passive, 1.0 active:
@@ -14,14 +14,14 @@ with the moving pulley points of our paths it returns exactly half the
 excursion (measured; it leaves out the points' dependence on the coordinate,
 and OpenSim's force application does the same), so the excursion is used.
 
-Sign (data contract, CLARIFICATIONS 14): ``moment_nm`` is the flexion moment
+Sign (data contract): ``moment_nm`` is the flexion moment
 an external device must apply to hold the joint, i.e. minus the net muscle
 moment (positive = flexion).  Passive: the stretched antagonists pull back,
 so holding a flexed joint needs a positive (flexing) moment.  Active: with
 every muscle at full activation the flexors win, so the device must apply an
 extension moment: negative.  The gravity moment of the segments (hand
 horizontal, palm down) is stored apart in ``gravity_moment_nm`` and added to
-``moment_nm`` only when ``include_gravity`` is set (issue 6 adds gravity from
+``moment_nm`` only when ``include_gravity`` is set (the cascade stage adds gravity from
 its own segment volumes).
 
 The passive joint structures (one ``CoordinateLimitForce`` per joint, see

@@ -1,4 +1,4 @@
-"""Generated OpenSim finger model (issue 3): bodies, joints and muscles from parameters.
+"""Generated OpenSim finger model: bodies, joints and muscles from parameters.
 
 The model holds one independent chain per finger (``F2`` index .. ``F5``
 little): a metacarpal ``{finger}_MC`` welded to ground and the phalanges
@@ -35,7 +35,7 @@ file), scaled per CCD run by the joint's breadth x depth^2
 The *reference* (unscaled) model is the mean finger divided, axis by axis, by
 the scale factors of the CCD's ``Original`` run: the paper scaled a generic
 model whose marker distances are not published, so we infer it from that row
-(CLARIFICATIONS 12).  Scaling the reference model by a run's Table 3-4
+.  Scaling the reference model by a run's Table 3-4
 factors then gives that run's finger, and the ``Original`` run gives the mean
 finger.
 

@@ -1,7 +1,7 @@
 """Per-patient joint loads from the response surfaces.
 
 For each exercise and joint: the passive moment at the target angle (0 at a
-0 deg target by definition, CLARIFICATIONS 14) with its prediction interval;
+0 deg target by definition) with its prediction interval;
 per joint the active safety limit = the magnitude of the active moment at the
 joint's largest target angle.  All moments in N m, positive = flexion.
 """
