@@ -2,7 +2,7 @@
 
 Columns ``Depth, Length, Breadth, num`` (coded CCD levels and run number) and one
 column per response ``F{n}_{P|A}_{JOINT}_{ANGLE}`` in N m (see
-``../shared/data/README.md``).  Trailing empty rows are ignored.  Rows are matched
+``resources/README.md``).  Trailing empty rows are ignored.  Rows are matched
 to our CCD runs by their coded levels, not by position.
 """
 
