@@ -144,3 +144,26 @@ def test_overlap_check_sees_a_node_pushed_through_a_wall():
     sq = np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0]]).T
     walls = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
     assert fem.pocket_sizes(sq, [walls])[0] == pytest.approx(1.0)
+
+
+def test_a_slave_on_a_shared_master_node_keeps_its_force_on_either_facet():
+    """A slave at the node two master facets share gets the same force from both (no fade at a shared end).
+
+    The fade of the penalty is meant for the extension past a free edge; at a shared end a projection a
+    round-off outside the facet used to get weight 0, so the force vanished whenever the tie between the
+    two facets went to that one (Newton then cycled between two residual levels).
+    """
+    pts, facets = _kinked_wall(20.0)
+    a = np.radians(20.0)
+    n1 = np.array([1.0 + np.cos(a), np.sin(a)]) / np.linalg.norm([1.0 + np.cos(a), np.sin(a)])  # node 1's normal
+    s = pts[1] - 0.02 * n1 + [0.0, 1e-9]  # 0.02 mm inside on node 1's normal, a round-off past facet 0's end
+    p = np.concatenate([pts, [s, s + [0.0, 0.1]]]).T
+    pair = ContactPair(p, np.array([[5, 4]]), facets, search=1.0, extend=0.5, smoothing=0.01, penalty_factor=1.0)
+    forces = []
+    for m in (0, 1):  # facet 0 ends at node 1 (the projection lies 1e-9 past it), facet 1 starts there
+        nodes = np.concatenate([[4], pair._nodes_2d(np.array([m]))[0]])
+        X = p[:, np.maximum(nodes, 0)].T[None]
+        lim = (pair.lo[[m]], pair.hi[[m]], pair.prev[[m]] >= 0, pair.next[[m]] >= 0)
+        forces.append(pair._local_force(X, np.array([1.0]), lim)[0, :2])
+    assert np.linalg.norm(forces[0]) > 0.01  # ~ eps g: the slave is 0.02 mm inside
+    np.testing.assert_allclose(forces[0], forces[1], rtol=1e-6, atol=1e-9)

@@ -51,7 +51,7 @@ def _merged(actuator: Mapping, override: Mapping) -> dict:
 
 
 def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bottom_kpa: float, case: str = "free",
-                           mesh=None, restarts: bool = True, **kwargs) -> UnitResult:
+                           mesh=None, **kwargs) -> UnitResult:
     """``solve_unit`` with geometry, mesh size, material, contact and solver from ``actuator``.
 
     ``mesh`` (a ``UnitMesh``) can be passed to reuse one across calls. A ray
@@ -64,7 +64,7 @@ def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bott
     um = mesh if mesh is not None else unit_mesh_from_config(actuator, dim)
     kwargs.setdefault("end_hold", actuator.get("end_hold", DEFAULT_END_HOLD))
     kwargs.setdefault("formulation", actuator.get("formulation", DEFAULT_FORMULATION))
-    tries = [{}] + (list(actuator.get("restarts", DEFAULT_RESTARTS)) if restarts else [])
+    tries = [{}] + list(actuator.get("restarts", DEFAULT_RESTARTS))  # restarts: [] for none
     best, spent = None, 0.0
     for attempt, override in enumerate(tries):
         act = _merged(actuator, override)
