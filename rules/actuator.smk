@@ -1,11 +1,13 @@
-# Stage actuator: nonlinear FEA of the three-chamber PNA unit.
-# Science in workflow/fem (scikit-fem).
+# Stage actuator (section 3.1): nonlinear FEA of the three-chamber PNA unit, its
+# pressure sweeps (sharded, resumable), surrogate cross-validation and fit, the
+# 2D-to-3D pressure mapping, and the unit under an external end moment.
+# Entry points in workflow/actuator/entry.py and entry_fem.py; the FE engine is workflow/fem.
 
 
 rule unit_check:
     input:
         unpack(get_fem_choice),
-        code=code_files("fem", "fidelity"),
+        code=code_files("scripts.unit_check"),
     output:
         nc=report("results/actuator/unit_check.nc", caption="../report/unit_check.rst", category="Actuator"),
         vtu="results/actuator/unit_3d_300kpa.vtu",
@@ -24,7 +26,7 @@ rule unit_check:
 # couples at prescribed end rotations against workflow/unit_model.py.
 rule unit_moment_check:
     input:
-        code=code_files("fem", "unit_moment_check", "unit_model"),
+        code=code_files("scripts.unit_moment_check"),
     output:
         nc=report("results/actuator/unit_moment_check.nc", caption="../report/unit_moment_check.rst", category="Actuator"),
         plot=report("results/actuator/unit_moment_check.png", caption="../report/unit_moment_check.rst", category="Actuator"),
@@ -38,3 +40,112 @@ rule unit_moment_check:
         "results/benchmarks/rules/unit_moment_check.tsv"
     script:
         "../workflow/scripts/unit_moment_check.py"
+
+rule sweep_shard:
+    input:
+        unpack(get_fem_choice),
+        code=code_files("scripts.sweep_shard"),
+    output:
+        "results/actuator/sweep/{fea}/shard{shard}.nc",
+    wildcard_constraints:
+        fea="2d|3d",
+        shard=r"\d+",
+    params:
+        sweep=get_sweep_params,
+        actuator=config.get("actuator", {}),
+        config_slice=get_sweep_slice,
+    log:
+        "logs/surrogates/sweep_shard/{fea}_{shard}.log",
+    benchmark:
+        "results/benchmarks/rules/sweep_shard_{fea}_{shard}.tsv"
+    script:
+        "../workflow/scripts/sweep_shard.py"
+
+
+rule sweep_merge:
+    input:
+        shards=get_sweep_shards,
+        code=code_files("scripts.sweep_merge"),
+    output:
+        "results/actuator/response_{fea}.nc",
+    wildcard_constraints:
+        fea="2d|3d",
+    params:
+        sweep=get_sweep_params,
+        config_slice=get_sweep_slice,
+    log:
+        "logs/surrogates/sweep_merge/{fea}.log",
+    benchmark:
+        "results/benchmarks/rules/sweep_merge_{fea}.tsv"
+    script:
+        "../workflow/scripts/sweep_merge.py"
+
+
+rule surrogate_cv:
+    input:
+        response_2d="results/actuator/response_2d.nc",
+        response_3d="results/actuator/response_3d.nc",
+        code=code_files("scripts.surrogate_cv"),
+    output:
+        cv="results/actuator/surrogate_cv.nc",
+        plot=report("results/actuator/surrogate_cv.png", caption="../report/surrogate_cv.rst", category="Actuator"),
+    params:
+        surrogates=config["surrogates"],
+        # fidelity.auto: the fastest regressor within the tolerance (else the best CV score)
+        tolerance=config["fidelity"]["tolerance"]["surrogate_score"] if config["fidelity"]["auto"] else None,
+        config_slice=cfg("sweep", "surrogates") | {"auto": config["fidelity"]["auto"],
+                                                   "tolerance": config["fidelity"]["tolerance"]["surrogate_score"]},
+    log:
+        "logs/surrogates/surrogate_cv.log",
+    benchmark:
+        "results/benchmarks/rules/surrogate_cv.tsv"
+    script:
+        "../workflow/scripts/surrogate_cv.py"
+
+
+rule surrogate_fit:
+    input:
+        response="results/actuator/response_{fea}.nc",
+        cv="results/actuator/surrogate_cv.nc",
+        code=code_files("scripts.surrogate_fit"),
+    output:
+        model="results/actuator/surrogate_{fea}.joblib",
+        plot=report(
+            "results/actuator/response_{fea}.png",
+            caption="../report/surrogate_response.rst",
+            category="Actuator",
+        ),
+    wildcard_constraints:
+        fea="2d|3d",
+    params:
+        surrogates=config["surrogates"],
+    log:
+        "logs/surrogates/surrogate_fit/{fea}.log",
+    benchmark:
+        "results/benchmarks/rules/surrogate_fit_{fea}.tsv"
+    script:
+        "../workflow/scripts/surrogate_fit.py"
+
+
+rule mapping_2d3d:
+    input:
+        table="resources/table08_planned_pressures_3d.csv",
+        surrogate_3d="results/actuator/surrogate_3d.joblib",
+        surrogate_2d="results/actuator/surrogate_2d.joblib",
+        code=code_files("scripts.mapping_2d3d"),
+    output:
+        nc="results/actuator/mapping_2d3d.nc",
+        plot=report(
+            "results/actuator/mapping_2d3d.png",
+            caption="../report/surrogate_mapping.rst",
+            category="Actuator",
+        ),
+    params:
+        pressure_limit=get_pressure_limit(),
+        config_slice=cfg("sweep", "surrogates") | {"pressure_limit": get_pressure_limit()},
+    log:
+        "logs/surrogates/mapping_2d3d.log",
+    benchmark:
+        "results/benchmarks/rules/mapping_2d3d.tsv"
+    script:
+        "../workflow/scripts/mapping_2d3d.py"

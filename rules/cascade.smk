@@ -1,5 +1,6 @@
 # Stage cascade: per-patient pressure plans on the reduced-order
 # finger-actuator model, and their comparison with the paper's Tables 8 and 10.
+# Entry points in workflow/cascade/entry.py.
 
 
 rule cascade_plan:
@@ -10,7 +11,7 @@ rule cascade_plan:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         joint_loads="results/patients/{patient}/joint_loads.nc",
-        code=code_files("cascade", "finger", "plots_cascade", "unit_model", "surrogates", "stability"),
+        code=code_files("scripts.cascade_plan"),
     output:
         plan="results/patients/{patient}/cascade_plan.nc",
         plot=report(
@@ -40,7 +41,7 @@ rule validate_cascade:
         table08="resources/table08_planned_pressures_3d.csv",
         table10="resources/table10_experimental_pressures_mean_finger.csv",
         table07="resources/table07_unit_targets.csv",
-        code=code_files("validation_cascade", "cascade"),
+        code=code_files("scripts.cascade_validate"),
     output:
         nc="results/validation/cascade.nc",
         plot=report(

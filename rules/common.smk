@@ -5,8 +5,9 @@ from pathlib import Path
 from snakemake.logging import logger
 from snakemake.utils import validate
 
-from workflow import fidelity, settings
-from workflow.provenance import code_files
+from workflow import settings
+from workflow.common import fidelity_choice
+from workflow.common.provenance import code_files
 
 validate(config, "../config/schema.yaml")
 # Checks JSON Schema cannot express (cross references between sections),
@@ -181,7 +182,7 @@ def get_fea_check_slice(wildcards):
 
 
 # --- Stage fidelity -----------------------------------
-FEM_CASES = [c.name for c in fidelity.fem_cases(config["fidelity"]["fem_cases"])]
+FEM_CASES = [c.name for c in fidelity_choice.fem_cases(config["fidelity"]["fem_cases"])]
 
 
 def fidelity_auto():

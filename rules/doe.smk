@@ -3,7 +3,7 @@
 
 rule ccd:
     input:
-        code=code_files("doe", "pipeline"),
+        code=code_files("scripts.ccd"),
     output:
         "results/doe/ccd.nc",
     params:
@@ -19,7 +19,7 @@ rule ccd:
 rule scaling:
     input:
         ccd="results/doe/ccd.nc",
-        code=code_files("doe", "pipeline"),
+        code=code_files("scripts.scaling"),
     output:
         "results/doe/scaling.nc",
     params:
@@ -37,7 +37,7 @@ rule validate_scaling:
     input:
         scaling="results/doe/scaling.nc",
         table="resources/table03_04_ccd_scaling.csv",
-        code=code_files("doe", "pipeline"),
+        code=code_files("scripts.validate_scaling"),
     output:
         report("results/validation/scaling.nc", caption="../report/scaling.rst", category="Musculoskeletal"),
     log:

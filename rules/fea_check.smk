@@ -1,8 +1,7 @@
 # Stage FEA check: every plan checked by a 2D plane-strain FEA of the
 # whole actuator strapped to the patient's finger (paper Fig. 18-21), and the
-# stand-alone whole actuator in 2D and 3D (Fig. 22). Science in
-# workflow/fea_check.py, workflow/fea_model.py, workflow/fea_standalone.py and
-# workflow/fem. Input functions live in rules/common.smk (see the lead's notes):
+# stand-alone whole actuator in 2D and 3D (Fig. 22). Entry points in
+# workflow/fea_check/entry.py; the FE models in workflow/fem. Input functions live in rules/common.smk:
 #   get_fea_exercises()      -> the exercises checked (config fea_check.exercises or all)
 #   get_fea_surrogates()     -> {"surrogate_2d": ..., "surrogate_3d": ...}
 #   get_fea_check_slice(wc)  -> the config a patient's check depends on
@@ -16,7 +15,7 @@ rule fea_check:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         joint_loads="results/patients/{patient}/joint_loads.nc",
-        code=code_files("fea_check", "fea_model", "plots_fea_check", "unit_model", "fidelity"),
+        code=code_files("scripts.fea_check"),
     output:
         nc="results/patients/{patient}/fea_check.nc",
         vtu=expand("results/patients/{{patient}}/fea_check_{exercise}.vtu", exercise=get_fea_exercises()),
@@ -47,7 +46,7 @@ rule standalone_actuator:
     input:
         unpack(get_fea_surrogates),
         plan="results/patients/{patient}/cascade_plan.nc",
-        code=code_files("fem", "fea_standalone", "fea_check", "mapping", "surrogates", "plots_fea_check"),
+        code=code_files("scripts.standalone_actuator"),
     output:
         nc="results/patients/{patient}/standalone_actuator.nc",
         plot=report(

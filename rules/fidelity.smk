@@ -2,8 +2,8 @@
 # fidelity the workflow offers, and, with fidelity.auto on, the cheapest one
 # that meets the stated tolerance per stage (the sweeps and the unit check take
 # the FE mesh chosen here, the patients' loads the response surfaces or direct
-# OpenSim sampling, the FEA check its mesh). Science in workflow/fidelity.py
-# (pure), workflow/fidelity_run.py (file level), workflow/plots_fidelity.py.
+# OpenSim sampling, the FEA check its mesh). Entry points in workflow/fidelity/entry.py
+# and entry_fem.py (the FE cases, on their own so judging the study does not rerun its FEA).
 # Input functions live in rules/common.smk:
 #   FEM_CASES               -> the FE unit cases of fidelity.fem_cases (names)
 #   get_fem_choice(wc)      -> {"fidelity": results/fidelity/fem.nc} when fidelity.auto, else {}
@@ -13,7 +13,7 @@
 
 rule fidelity_fem:
     input:
-        code=code_files("fem_study"),
+        code=code_files("scripts.fidelity_fem"),
     output:
         "results/fidelity/fem/{case}.nc",
     wildcard_constraints:
@@ -34,7 +34,7 @@ rule fidelity_fem:
 rule fidelity_fem_choice:
     input:
         cases=expand("results/fidelity/fem/{case}.nc", case=FEM_CASES),
-        code=code_files("fidelity_run"),
+        code=code_files("scripts.fidelity_fem_choice"),
     output:
         "results/fidelity/fem.nc",
     params:
@@ -54,7 +54,7 @@ rule fidelity_msk:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         rsm="results/musculoskeletal/rsm.nc",
-        code=code_files("fidelity_run", "musculoskeletal.direct"),
+        code=code_files("scripts.fidelity_msk"),
     output:
         "results/fidelity/musculoskeletal.nc",
     params:
@@ -79,7 +79,7 @@ rule fidelity_check:
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
         joint_loads="results/patients/{patient}/joint_loads.nc",
-        code=code_files("fidelity_run", "fea_check", "fea_model", "unit_model"),
+        code=code_files("scripts.fidelity_check"),
     output:
         "results/patients/{patient}/fidelity_check.nc",
     params:
@@ -107,7 +107,7 @@ rule speed_accuracy:
         response_3d="results/actuator/response_3d.nc",
         cv="results/actuator/surrogate_cv.nc",
         msk="results/fidelity/musculoskeletal.nc",
-        code=code_files("fidelity_run", "plots_fidelity"),
+        code=code_files("scripts.speed_accuracy"),
     output:
         nc="results/benchmarks/speed_accuracy.nc",
         plot=report("results/benchmarks/speed_accuracy.png", caption="../report/speed_accuracy.rst",
@@ -130,7 +130,7 @@ rule speed_accuracy:
 rule speed_accuracy_table:
     input:
         dataset="results/benchmarks/speed_accuracy.nc",
-        code=code_files("report_tables"),
+        code=code_files("scripts.report_table"),
     output:
         report("results/report/speed_accuracy.html", caption="../report/speed_accuracy_table.rst",
                category="Speed and accuracy"),
@@ -147,7 +147,7 @@ rule speed_accuracy_table:
 rule fidelity_choices:
     input:
         unpack(get_fidelity_choice_inputs),
-        code=code_files("report_tables"),
+        code=code_files("scripts.fidelity_choices"),
     output:
         report("results/report/fidelity_choices.html", caption="../report/fidelity_choices.rst",
                category="Speed and accuracy"),

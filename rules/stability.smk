@@ -2,12 +2,12 @@
 # small FE studies of the 2D unit (extra rays by mesh, contact and formulation;
 # locking against K/mu0) and the maps built from the sweeps, the unit check,
 # the surrogates' sampled region, the patients' coded levels and their plans.
-# Science in workflow/stability.py, figures in workflow/plots_stability.py.
+# Entry points in workflow/stability/entry.py, figures in workflow/stability/plots.py.
 
 
 rule stability_rays:
     input:
-        code=code_files("stability", "stability_run", "sweep", "fem"),
+        code=code_files("scripts.stability_rays"),
     output:
         "results/stability/rays_2d.nc",
     params:
@@ -26,7 +26,7 @@ rule stability_rays:
 
 rule stability_locking:
     input:
-        code=code_files("stability", "stability_run", "sweep", "fem"),
+        code=code_files("scripts.stability_locking"),
     output:
         "results/stability/locking.nc",
     params:
@@ -53,7 +53,7 @@ rule stability_maps:
         loads=expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS),
         plans=expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS),
         fem_cases=expand("results/fidelity/fem/{case}.nc", case=FEM_CASES),
-        code=code_files("stability", "stability_run", "plots_stability", "sweep", "fidelity"),
+        code=code_files("scripts.stability_maps"),
     output:
         nc="results/stability/stability.nc",
         failures=report("results/stability/newton_failures.png", caption="../report/stability_failures.rst",

@@ -4,7 +4,7 @@
 rule track_patient:
     input:
         unpack(get_tracking_inputs),
-        code=code_files("tracking"),
+        code=code_files("scripts.track_patient"),
     output:
         "results/tracking/{patient}.json",
     params:

@@ -1,13 +1,13 @@
 # Stage report: what `snakemake --report report.html` shows
 # beyond the stages' own plots -- the moment-angle curves and the tables (one
-# small HTML page each, shown inline). Science-free: workflow/report_tables.py
-# and workflow/plots_report.py only reformat datasets.
+# small HTML page each, shown inline). Science-free: workflow/reporting/ and
+# workflow/musculoskeletal/plots.py only reformat datasets.
 
 
 rule moment_angle_plot:
     input:
         moments="results/musculoskeletal/moments.nc",
-        code=code_files("plots_report"),
+        code=code_files("scripts.moment_angle_plot"),
     output:
         report("results/musculoskeletal/moment_angle.png", caption="../report/moment_angle.rst",
                category="Musculoskeletal"),
@@ -29,7 +29,7 @@ rule report_table:
             "mapping": "results/actuator/mapping_2d3d.nc",
             "cascade_validation": "results/validation/cascade.nc",
         }[wc.table],
-        code=code_files("report_tables"),
+        code=code_files("scripts.report_table"),
     output:
         report("results/report/{table}.html", caption="../report/tables.rst", category="Tables"),
     wildcard_constraints:
@@ -45,7 +45,7 @@ rule report_table:
 rule joint_loads_table:
     input:
         dataset="results/patients/{patient}/joint_loads.nc",
-        code=code_files("report_tables"),
+        code=code_files("scripts.report_table"),
     output:
         report("results/patients/{patient}/joint_loads.html", caption="../report/tables.rst",
                category="Patients", subcategory="{patient}"),
@@ -62,7 +62,7 @@ rule joint_loads_table:
 rule cascade_plan_table:
     input:
         dataset="results/patients/{patient}/cascade_plan.nc",
-        code=code_files("report_tables"),
+        code=code_files("scripts.report_table"),
     output:
         report("results/patients/{patient}/cascade_plan.html", caption="../report/tables.rst",
                category="Cascade", subcategory="{patient}"),
