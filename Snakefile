@@ -16,18 +16,16 @@ report: "report/workflow.rst"
 include: "rules/common.smk"
 include: "rules/doe.smk"
 include: "rules/musculoskeletal.smk"
-include: "rules/opensim.smk"
 include: "rules/tracking.smk"
 include: "rules/actuator.smk"
-include: "rules/surrogates.smk"
 include: "rules/cascade.smk"
 include: "rules/fea_check.smk"
 include: "rules/fidelity.smk"
 include: "rules/stability.smk"
-include: "rules/report.smk"
+include: "rules/reporting.smk"
 
 
 rule all:
+    default_target: True
     input:
         get_final_output(),
-    default_target: True

@@ -1,4 +1,4 @@
-"""Contact study of the 2D unit (issue 4 items 4, 8, 9): not a test, figures -> benchmarks/out/contact_*.csv.
+"""Contact study of the 2D unit: not a test, figures -> benchmarks/out/contact_*.csv.
 
 Parts (P_B = 0, P_T = 60/180/300 kPa, plane strain, per unit, full 20 mm width):
 
@@ -53,11 +53,21 @@ def _row(res, h: float, **extra) -> dict:
     """One result row: per-unit angle (deg) / full-width moment (N m) at P_KPA and the run's figures."""
     key = "bending_angle_deg" if res.case == "free" else "bending_moment_nm"
     vals = _at(res.history, key)
-    row = {"h_mm": h, "case": res.case, "ndofs": res.ndofs, "status": res.status, "reason": res.reason,
-           "p_reached_kpa": res.load_factor * P_KPA[-1], "max_penetration_mm": res.max_penetration_mm,
-           "min_gap_mm": min((r["gmin"] for r in res.history), default=np.inf),
-           "wall_time_s": res.wall_time_s, "newton_iterations": res.newton_iterations, "steps": res.steps,
-           "cutbacks": res.cutbacks, "end_hold": END_HOLD["value"] if res.case == "blocked" else ""}
+    row = {
+        "h_mm": h,
+        "case": res.case,
+        "ndofs": res.ndofs,
+        "status": res.status,
+        "reason": res.reason,
+        "p_reached_kpa": res.load_factor * P_KPA[-1],
+        "max_penetration_mm": res.max_penetration_mm,
+        "min_gap_mm": min((r["gmin"] for r in res.history), default=np.inf),
+        "wall_time_s": res.wall_time_s,
+        "newton_iterations": res.newton_iterations,
+        "steps": res.steps,
+        "cutbacks": res.cutbacks,
+        "end_hold": END_HOLD["value"] if res.case == "blocked" else "",
+    }
     row.update({f"{key}_{int(q)}": v for q, v in zip(P_KPA, vals)})
     row.update(extra)
     return row
@@ -69,8 +79,16 @@ END_HOLD = {"value": "backbone"}
 
 def _solve(h: float, case: str, **contact) -> object:
     um = fem.build_unit_mesh(h=h, dim=2)
-    return fem.solve_unit(um, P_KPA[-1], 0.0, case, True, contact_options=contact or None,
-                          stops=tuple(P_KPA / P_KPA[-1]), end_hold=END_HOLD["value"])
+    return fem.solve_unit(
+        um,
+        P_KPA[-1],
+        0.0,
+        case,
+        True,
+        contact_options=contact or None,
+        stops=tuple(P_KPA / P_KPA[-1]),
+        end_hold=END_HOLD["value"],
+    )
 
 
 def convergence(hs) -> pd.DataFrame:
@@ -93,15 +111,26 @@ def richardson(df: pd.DataFrame) -> pd.DataFrame:
             if not np.isclose(hs[i], 2 * hs[i + 1]) or not np.isclose(hs[i + 1], 2 * hs[i + 2]):
                 continue
             for q in P_KPA:
-                a = sub[f"{key}_{int(q)}"].to_numpy()[i:i + 3]
+                a = sub[f"{key}_{int(q)}"].to_numpy()[i : i + 3]
                 d1, d2 = a[0] - a[1], a[1] - a[2]
                 ok = np.all(np.isfinite(a)) and d1 * d2 > 0 and abs(d2) < abs(d1)
                 p = np.log2(d1 / d2) if ok else np.nan
                 ext = a[2] + (a[2] - a[1]) / (2**p - 1) if ok else np.nan
-                rows.append({"case": case, "quantity": key, "p_kpa": q, "h_mm": "/".join(f"{v:g}" for v in hs[i:i + 3]),
-                             "coarse": a[0], "medium": a[1], "fine": a[2], "observed_order": p, "richardson": ext,
-                             "fine_error_pct": 100 * (a[2] / ext - 1) if ok else np.nan,
-                             "medium_error_pct": 100 * (a[1] / ext - 1) if ok else np.nan})
+                rows.append(
+                    {
+                        "case": case,
+                        "quantity": key,
+                        "p_kpa": q,
+                        "h_mm": "/".join(f"{v:g}" for v in hs[i : i + 3]),
+                        "coarse": a[0],
+                        "medium": a[1],
+                        "fine": a[2],
+                        "observed_order": p,
+                        "richardson": ext,
+                        "fine_error_pct": 100 * (a[2] / ext - 1) if ok else np.nan,
+                        "medium_error_pct": 100 * (a[1] / ext - 1) if ok else np.nan,
+                    }
+                )
     return pd.DataFrame(rows)
 
 
@@ -109,8 +138,14 @@ def penalty(h: float = 1.0, factors=(30.0, 100.0, 300.0)) -> pd.DataFrame:
     rows = []
     for k in factors:
         for case in ("free", "blocked"):
-            rows.append(_row(_solve(h, case, penalty_factor=k), h, penalty_factor=k,
-                             eps_mpa_per_mm=fem.contact_penalty(fem.material_constants({}), {"penalty_factor": k})))
+            rows.append(
+                _row(
+                    _solve(h, case, penalty_factor=k),
+                    h,
+                    penalty_factor=k,
+                    eps_mpa_per_mm=fem.contact_penalty(fem.material_constants({}), {"penalty_factor": k}),
+                )
+            )
             print(rows[-1], flush=True)
     return pd.DataFrame(rows)
 
@@ -133,17 +168,33 @@ def normals(h: float = 0.5) -> pd.DataFrame:
     for name, (solver, use_stops) in VARIANTS.items():
         for smooth in (True, False):
             model = fem.unit_model(um, P_KPA[-1], 0.0, "free", True)
-            model.contacts = contact_pairs_from_mesh(um, opts["search_mm"], opts["extend"], opts["smoothing_mm"],
-                                                     smooth_normals=smooth)
+            model.contacts = contact_pairs_from_mesh(
+                um, opts["search_mm"], opts["extend"], opts["smoothing_mm"], smooth_normals=smooth
+            )
             t0 = time.perf_counter()
-            res = solve_path(model, um.mesh.p, dict(DEFAULT_SOLVER, **solver),
-                             _measure_factory(um, model, "free", P_KPA[-1], 0.0),
-                             stops=tuple(P_KPA / P_KPA[-1]) if use_stops else ())
+            res = solve_path(
+                model,
+                um.mesh.p,
+                dict(DEFAULT_SOLVER, **solver),
+                _measure_factory(um, model, "free", P_KPA[-1], 0.0),
+                stops=tuple(P_KPA / P_KPA[-1]) if use_stops else (),
+            )
             last = res.history[-1] if res.history else {"bending_angle_deg": np.nan}
-            rows.append({"h_mm": h, "steps_variant": name, "smooth_normals": smooth, "status": res.status,
-                         "reason": res.reason, "p_reached_kpa": res.lam * P_KPA[-1],
-                         "bending_angle_deg_reached": last["bending_angle_deg"], "newton_iterations": res.iterations,
-                         "steps": res.steps, "cutbacks": res.cutbacks, "wall_time_s": time.perf_counter() - t0})
+            rows.append(
+                {
+                    "h_mm": h,
+                    "steps_variant": name,
+                    "smooth_normals": smooth,
+                    "status": res.status,
+                    "reason": res.reason,
+                    "p_reached_kpa": res.lam * P_KPA[-1],
+                    "bending_angle_deg_reached": last["bending_angle_deg"],
+                    "newton_iterations": res.iterations,
+                    "steps": res.steps,
+                    "cutbacks": res.cutbacks,
+                    "wall_time_s": time.perf_counter() - t0,
+                }
+            )
             print(rows[-1], flush=True)
     return pd.DataFrame(rows)
 
@@ -169,11 +220,22 @@ def felupe_check(hs) -> pd.DataFrame:
             info = {"wall_time_s": time.perf_counter() - t0, "min_gap_mm": np.nan, "reason": str(exc)[-200:]}
         err = np.abs(ours - theirs) / abs(theirs[-1])
         for q, a, b, e in zip(P_KPA, ours, theirs, err):
-            rows.append({"h_mm": h, "ndofs": res.ndofs, "p_kpa": q, "ours_deg_per_unit": a / 3,
-                         "felupe_deg_per_unit": b / 3, "error_pct_of_theta300": 100 * e, "ours_status": res.status,
-                         "ours_wall_time_s": res.wall_time_s,
-                         "felupe_wall_time_s": info["wall_time_s"], "ours_max_penetration_mm": res.max_penetration_mm,
-                         "felupe_min_gap_mm": info["min_gap_mm"], "felupe_reason": info.get("reason", "")})
+            rows.append(
+                {
+                    "h_mm": h,
+                    "ndofs": res.ndofs,
+                    "p_kpa": q,
+                    "ours_deg_per_unit": a / 3,
+                    "felupe_deg_per_unit": b / 3,
+                    "error_pct_of_theta300": 100 * e,
+                    "ours_status": res.status,
+                    "ours_wall_time_s": res.wall_time_s,
+                    "felupe_wall_time_s": info["wall_time_s"],
+                    "ours_max_penetration_mm": res.max_penetration_mm,
+                    "felupe_min_gap_mm": info["min_gap_mm"],
+                    "felupe_reason": info.get("reason", ""),
+                }
+            )
         print(rows[-3:], flush=True)
     return pd.DataFrame(rows)
 
@@ -184,8 +246,12 @@ def main(argv=None):
     ap.add_argument("--h", default="2,1,0.5,0.25", help="element sizes (mm) of the convergence part")
     ap.add_argument("--felupe-h", default="1,0.5", help="element sizes (mm) of the FElupe part")
     ap.add_argument("--normals-h", default="0.5", help="element size (mm) of the normals part")
-    ap.add_argument("--end-hold", default="backbone", choices=fem.END_HOLDS,
-                    help="end nodes held plane in case blocked (as config actuator.end_hold)")
+    ap.add_argument(
+        "--end-hold",
+        default="backbone",
+        choices=fem.END_HOLDS,
+        help="end nodes held plane in case blocked (as config actuator.end_hold)",
+    )
     args = ap.parse_args(argv)
     END_HOLD["value"] = args.end_hold
     parts = args.parts.split(",")

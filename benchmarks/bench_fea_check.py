@@ -1,4 +1,4 @@
-"""Benchmark of the FEA check (issue 9 item 7): not a test, a timing table.
+"""Benchmark of the FEA check: not a test, a timing table.
 
 The mean finger with the test springs of tests/test_cascade.py and a plan made
 with the analytic unit of tests/test_cascade.py (LinearUnit), or a given
@@ -27,6 +27,8 @@ import resource
 import sys
 from pathlib import Path
 
+from workflow.cascade import patient, planning
+
 OUT = Path(__file__).resolve().parent / "out"
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,12 +40,13 @@ def _case(h: float, exercises: list[str], plan_path: str | None, surrogates, q):
     import numpy as np
     import xarray as xr
     import yaml
-
     from test_cascade import ACTUATOR, LinearUnit, springs
     from test_finger import DENSITIES, SECTION, mean_finger
-    from workflow import cascade as C
-    from workflow.fea_check import load_surrogate_angles, run_fea_check
-    from workflow.fea_model import build_patient_fea
+
+    from workflow.cascade import model as C
+    from workflow.fea_check.entry import load_surrogate_angles
+    from workflow.fea_check.model import build_patient_fea
+    from workflow.fea_check.run import run_fea_check
 
     cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
     finger = mean_finger(springs=springs(), densities=DENSITIES)
@@ -52,38 +55,65 @@ def _case(h: float, exercises: list[str], plan_path: str | None, surrogates, q):
         res = Path(plan_path).resolve().parents[2]  # results/patients/{patient}/cascade_plan.nc
         pdir = Path(plan_path).resolve().parent
         if (pdir / "joint_loads.nc").is_file():  # the patient's own finger and springs, as the workflow builds them
-            finger, _ = C.patient_finger(cfg["patients"].get(pdir.name, {"finger": "F3"}), xr.load_dataset(pdir / "joint_loads.nc"),
-                                         xr.load_dataset(res / "musculoskeletal" / "moments.nc"),
-                                         xr.load_dataset(res / "doe" / "ccd.nc"),
-                                         cascade_cfg=dict(cfg["cascade"], section_points=str(SECTION)),
-                                         anthropometry=cfg["anthropometry"])
+            finger, _ = patient.patient_finger(
+                cfg["patients"].get(pdir.name, {"finger": "F3"}),
+                xr.load_dataset(pdir / "joint_loads.nc"),
+                xr.load_dataset(res / "musculoskeletal" / "moments.nc"),
+                xr.load_dataset(res / "doe" / "ccd.nc"),
+                cascade_cfg=dict(cfg["cascade"], section_points=str(SECTION)),
+                anthropometry=cfg["anthropometry"],
+            )
     else:
         model = C.build_cascade(finger, LinearUnit(), actuator_dims_mm=ACTUATOR)
         tg = {e: [v["mcp"], v["pip"], v["dip"]] for e, v in cfg["exercises"].items()}
-        plan = C.plans_dataset(model, C.plan_patient(model, tg, tol_deg=5.0), tol_deg=5.0, active_limits_nm=None)
+        plan = planning.plans_dataset(
+            model, planning.plan_patient(model, tg, tol_deg=5.0), tol_deg=5.0, active_limits_nm=None
+        )
     upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
-    fea = build_patient_fea(finger, upg, actuator_cfg=cfg["actuator"], cascade_cfg=dict(cfg["cascade"], section_points=str(SECTION)),
-                            reference_dims_mm={k: v["mean"] for k, v in cfg["anthropometry"]["measures"].items()},
-                            fea_cfg={**cfg["fea_check"], "h_actuator_mm": h, "h_finger_mm": h})
+    fea = build_patient_fea(
+        finger,
+        upg,
+        actuator_cfg=cfg["actuator"],
+        cascade_cfg=dict(cfg["cascade"], section_points=str(SECTION)),
+        reference_dims_mm={k: v["mean"] for k, v in cfg["anthropometry"]["measures"].items()},
+        fea_cfg={**cfg["fea_check"], "h_actuator_mm": h, "h_finger_mm": h},
+    )
     solver = dict(cfg["actuator"]["solver"])
     solver.update(cfg["fea_check"]["solver"])
     a3, a2, pm2, pm3 = load_surrogate_angles(*(surrogates or (None, None)))
-    ds, checks, grav, _ = run_fea_check(fea, plan, exercises=exercises, solver=solver, tolerance_deg=5.0,
-                                     angle_3d=a3, angle_2d=a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3)
+    ds, checks, grav, _ = run_fea_check(
+        fea,
+        plan,
+        exercises=exercises,
+        solver=solver,
+        tolerance_deg=5.0,
+        angle_3d=a3,
+        angle_2d=a2,
+        p_max_2d_kpa=pm2,
+        p_max_3d_kpa=pm3,
+    )
     rows = []
     for c in checks:
-        rows.append({
-            "h_mm": h, "exercise": c.exercise, "ndofs": c.result.ndofs,
-            "gravity_wall_s": round(grav.wall_time_s, 2), "gravity_newton": grav.newton_iterations,
-            "pressure_wall_s": round(c.wall_time_s, 2), "pressure_newton": c.result.newton_iterations,
-            "pressure_steps": c.result.steps, "status": c.result.status, "load_factor": round(c.result.load_factor, 4),
-            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-            "peak_heap_mb": round(c.peak_memory_mb, 1),
-            "angles_deg": " ".join(f"{a:.1f}" for a in c.angle_deg),
-            "target_deg": " ".join(f"{a:.0f}" for a in plan["target_angle_deg"].sel(exercise=c.exercise).values),
-            "plan_deg": " ".join(f"{a:.1f}" for a in plan["predicted_angle_deg"].sel(exercise=c.exercise).values),
-            "droop_deg": " ".join(f"{a:.1f}" for a in np.asarray(grav.joint_angles_deg)),
-        })
+        rows.append(
+            {
+                "h_mm": h,
+                "exercise": c.exercise,
+                "ndofs": c.result.ndofs,
+                "gravity_wall_s": round(grav.wall_time_s, 2),
+                "gravity_newton": grav.newton_iterations,
+                "pressure_wall_s": round(c.wall_time_s, 2),
+                "pressure_newton": c.result.newton_iterations,
+                "pressure_steps": c.result.steps,
+                "status": c.result.status,
+                "load_factor": round(c.result.load_factor, 4),
+                "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+                "peak_heap_mb": round(c.peak_memory_mb, 1),
+                "angles_deg": " ".join(f"{a:.1f}" for a in c.angle_deg),
+                "target_deg": " ".join(f"{a:.0f}" for a in plan["target_angle_deg"].sel(exercise=c.exercise).values),
+                "plan_deg": " ".join(f"{a:.1f}" for a in plan["predicted_angle_deg"].sel(exercise=c.exercise).values),
+                "droop_deg": " ".join(f"{a:.1f}" for a in np.asarray(grav.joint_angles_deg)),
+            }
+        )
     q.put(rows)
 
 

@@ -62,9 +62,15 @@ def h_eff(um) -> float:
 def solve_ours(um, formulation: str) -> dict:
     res = fem.solve_unit(um, P_KPA[-1], 0.0, "free", False, formulation=formulation, stops=tuple(P_KPA / P_KPA[-1]))
     at = {round(r["p_top_kpa"], 6): r["bending_angle_total_deg"] for r in res.history}
-    row = {"status": res.status, "reason": res.reason, "p_reached_kpa": res.load_factor * P_KPA[-1],
-           "wall_time_s": res.wall_time_s, "steps": res.steps,
-           "iterations": res.newton_iterations, "cutbacks": res.cutbacks}
+    row = {
+        "status": res.status,
+        "reason": res.reason,
+        "p_reached_kpa": res.load_factor * P_KPA[-1],
+        "wall_time_s": res.wall_time_s,
+        "steps": res.steps,
+        "iterations": res.newton_iterations,
+        "cutbacks": res.cutbacks,
+    }
     row.update({f"theta_{int(q)}_deg": at.get(round(q, 6), np.nan) for q in P_KPA})
     return row
 
@@ -75,9 +81,15 @@ def solve_felupe(um, nsteps: int) -> dict:
     info = {}
     # partial: if its cut-back gives up, the pressures reached still count (NaN beyond)
     ang = felupe_free_angles(um, P_KPA, fem.material_constants({}), nsteps=nsteps, info=info, partial=True)
-    row = {"status": info["status"], "reason": info["reason"][:160], "p_reached_kpa": info["p_reached_kpa"],
-           "wall_time_s": info["wall_time_s"], "steps": info["increments"], "iterations": np.nan,
-           "cutbacks": info["cutbacks"]}
+    row = {
+        "status": info["status"],
+        "reason": info["reason"][:160],
+        "p_reached_kpa": info["p_reached_kpa"],
+        "wall_time_s": info["wall_time_s"],
+        "steps": info["increments"],
+        "iterations": np.nan,
+        "cutbacks": info["cutbacks"],
+    }
     row.update({f"theta_{int(q)}_deg": float(a) for q, a in zip(P_KPA, ang)})
     return row
 
@@ -120,9 +132,19 @@ def tables(df: pd.DataFrame):
                 continue
             f = sub[col].to_numpy()
             r = richardson(sub.h_eff_mm.to_numpy(), f)
-            rich.append({"dim": dim, "code": code, "p_kpa": q, "h_mm": "/".join(f"{v:g}" for v in sub.h_mm[::-1]),
-                         "coarse": f[2], "medium": f[1], "fine": f[0], **r,
-                         "fine_error_pct": 100 * (f[0] / r["limit"] - 1)})
+            rich.append(
+                {
+                    "dim": dim,
+                    "code": code,
+                    "p_kpa": q,
+                    "h_mm": "/".join(f"{v:g}" for v in sub.h_mm[::-1]),
+                    "coarse": f[2],
+                    "medium": f[1],
+                    "fine": f[0],
+                    **r,
+                    "fine_error_pct": 100 * (f[0] / r["limit"] - 1),
+                }
+            )
     rich = pd.DataFrame(rich)
     comp = []
     if len(rich):
@@ -130,8 +152,9 @@ def tables(df: pd.DataFrame):
             lim = dict(zip(sub.code, sub.limit))
             if "ours enhanced_paper" in lim and "felupe Q1" in lim:
                 a, b = lim["ours enhanced_paper"], lim["felupe Q1"]
-                comp.append({"dim": dim, "p_kpa": q, "ours_limit_deg": a, "felupe_limit_deg": b,
-                             "diff_pct": 100 * (a / b - 1)})
+                comp.append(
+                    {"dim": dim, "p_kpa": q, "ours_limit_deg": a, "felupe_limit_deg": b, "diff_pct": 100 * (a / b - 1)}
+                )
     return rich, pd.DataFrame(comp)
 
 
@@ -150,8 +173,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--h2", type=float, nargs="*", default=[1.0, 0.5, 0.25], help="2D element sizes, mm")
     ap.add_argument("--h3", type=float, nargs="*", default=[2.0, 1.4, 1.0], help="3D element sizes, mm")
-    ap.add_argument("--mixed-dims", type=int, nargs="*", default=[2],
-                    help="also solve ours with formulation mixed (FElupe's technology) in these dims")
+    ap.add_argument(
+        "--mixed-dims",
+        type=int,
+        nargs="*",
+        default=[2],
+        help="also solve ours with formulation mixed (FElupe's technology) in these dims",
+    )
     ap.add_argument("--felupe-steps", type=int, default=20, help="FElupe substeps (cut back where one fails)")
     ap.add_argument("--append", action="store_true", help="keep the rows of the CSV already there, skip their solves")
     ap.add_argument("--tag", default="bench_felupe", help="output file stem in benchmarks/out")
@@ -163,10 +191,17 @@ def main(argv=None):
     for dim, hs in ((2, a.h2), (3, a.h3)):
         for h in hs:
             um = fem.build_unit_mesh(h=h, dim=dim)
-            base = {"dim": dim, "h_mm": h, "h_eff_mm": h_eff(um), "ndofs": dim * um.mesh.p.shape[1],
-                    "cells": um.mesh.t.shape[1]}
-            solves = [("ours enhanced_paper", lambda: solve_ours(um, "enhanced_paper")),
-                      ("felupe Q1", lambda: solve_felupe(um, a.felupe_steps))]
+            base = {
+                "dim": dim,
+                "h_mm": h,
+                "h_eff_mm": h_eff(um),
+                "ndofs": dim * um.mesh.p.shape[1],
+                "cells": um.mesh.t.shape[1],
+            }
+            solves = [
+                ("ours enhanced_paper", lambda: solve_ours(um, "enhanced_paper")),
+                ("felupe Q1", lambda: solve_felupe(um, a.felupe_steps)),
+            ]
             if dim in a.mixed_dims:
                 solves.append(("ours mixed", lambda: solve_ours(um, "mixed")))
             for code, run in solves:
@@ -178,15 +213,49 @@ def main(argv=None):
     df = pd.DataFrame(rows)
     rich, comp = tables(df)
     rich.to_csv(OUT / f"{a.tag}_richardson.csv", index=False)
-    cols = ["code", "dim", "h_mm", "h_eff_mm", "ndofs", "status", "p_reached_kpa", "theta_60_deg", "theta_180_deg",
-            "theta_300_deg",
-            "wall_time_s", "steps", "iterations", "cutbacks"]
-    md = ["# Free angle without contact (total, deg; per unit = / 3), P_B = 0\n",
-          to_markdown(df.sort_values(["dim", "h_mm", "code"], ascending=[True, False, True])[cols]),
-          "\n## Richardson extrapolation of the three finest meshes (r from h_eff)\n",
-          to_markdown(rich[["dim", "code", "p_kpa", "h_mm", "coarse", "medium", "fine", "r21", "r32", "order", "limit",
-                            "fine_error_pct"]]) if len(rich) else "(fewer than three meshes)\n",
-          "\n## Limits: ours (enhanced paper) against FElupe (Q1)\n", to_markdown(comp) if len(comp) else "-\n"]
+    cols = [
+        "code",
+        "dim",
+        "h_mm",
+        "h_eff_mm",
+        "ndofs",
+        "status",
+        "p_reached_kpa",
+        "theta_60_deg",
+        "theta_180_deg",
+        "theta_300_deg",
+        "wall_time_s",
+        "steps",
+        "iterations",
+        "cutbacks",
+    ]
+    md = [
+        "# Free angle without contact (total, deg; per unit = / 3), P_B = 0\n",
+        to_markdown(df.sort_values(["dim", "h_mm", "code"], ascending=[True, False, True])[cols]),
+        "\n## Richardson extrapolation of the three finest meshes (r from h_eff)\n",
+        to_markdown(
+            rich[
+                [
+                    "dim",
+                    "code",
+                    "p_kpa",
+                    "h_mm",
+                    "coarse",
+                    "medium",
+                    "fine",
+                    "r21",
+                    "r32",
+                    "order",
+                    "limit",
+                    "fine_error_pct",
+                ]
+            ]
+        )
+        if len(rich)
+        else "(fewer than three meshes)\n",
+        "\n## Limits: ours (enhanced paper) against FElupe (Q1)\n",
+        to_markdown(comp) if len(comp) else "-\n",
+    ]
     text = "\n".join(md)
     (OUT / f"{a.tag}.md").write_text(text)
     print(text)

@@ -1,4 +1,4 @@
-"""Benchmark of the unit FE model (issue 4 item 9): not a test, a timing table.
+"""Benchmark of the unit FE model: not a test, a timing table.
 
 Per case (2D/3D, element size, contact on/off, free/blocked), from 0 to
 P_T = 300 kPa (P_B = 0): DOFs, wall time, Newton iterations, load steps,
@@ -69,6 +69,7 @@ def _instrument() -> dict:
                 stats[name] += dt
                 if name == "t_solid_s" and kwargs.get("tangent", args[2] if len(args) > 2 else True):
                     stats["t_solid_tangent_s"] += dt
+
         return wrapper
 
     for name, (mod, attr) in _TIMED.items():
@@ -112,8 +113,15 @@ def _case(args):
     um = fem.build_unit_mesh(h=h, dim=dim)
     r = fem.solve_unit(um, p, 0.0, case, contact)
     row = {k: v for k, v in r.as_dict().items() if k != "history"}
-    row.update(stats, h_mm=h, h_eff_mm=_mesh_size(um), code="workflow.fem", peak_rss_mb=_peak_mb(),
-               solver=_linsolve.default_solver.backend, analyses=_linsolve.default_solver.stats["analyses"])
+    row.update(
+        stats,
+        h_mm=h,
+        h_eff_mm=_mesh_size(um),
+        code="workflow.fem",
+        peak_rss_mb=_peak_mb(),
+        solver=_linsolve.default_solver.backend,
+        analyses=_linsolve.default_solver.stats["analyses"],
+    )
     return row
 
 
@@ -122,6 +130,7 @@ def _felupe_case(args):
     dim, h, p, nsteps = args
     sys.path.insert(0, str(ROOT / "tests"))
     from _felupe_unit import felupe_free_angles
+
     from workflow import fem
 
     um = fem.build_unit_mesh(h=h, dim=dim)
@@ -129,11 +138,22 @@ def _felupe_case(args):
     t0 = time.perf_counter()
     info = {}
     ang = felupe_free_angles(um, [p], mat, nsteps=nsteps, info=info)
-    return {"code": f"felupe ({nsteps} substeps, cut-back)", "dim": dim, "h_mm": h, "h_eff_mm": _mesh_size(um),
-            "case": "free", "contact": False, "wall_time_s": time.perf_counter() - t0, "status": 0,
-            "steps": info["increments"], "cutbacks": info["cutbacks"],
-            "bending_angle_total_deg": float(ang[0]), "bending_angle_deg": float(ang[0]) / 3,
-            "ndofs": dim * um.mesh.p.shape[1], "peak_rss_mb": _peak_mb()}
+    return {
+        "code": f"felupe ({nsteps} substeps, cut-back)",
+        "dim": dim,
+        "h_mm": h,
+        "h_eff_mm": _mesh_size(um),
+        "case": "free",
+        "contact": False,
+        "wall_time_s": time.perf_counter() - t0,
+        "status": 0,
+        "steps": info["increments"],
+        "cutbacks": info["cutbacks"],
+        "bending_angle_total_deg": float(ang[0]),
+        "bending_angle_deg": float(ang[0]) / 3,
+        "ndofs": dim * um.mesh.p.shape[1],
+        "peak_rss_mb": _peak_mb(),
+    }
 
 
 def run_isolated(fun, args):
@@ -161,8 +181,14 @@ def richardson(h: np.ndarray, phi: np.ndarray, safety: float = 1.25) -> dict:
     f1, f2, f3 = np.asarray(phi, float)[order]
     r21, r32 = h2 / h1, h3 / h2
     e21, e32 = f2 - f1, f3 - f2
-    out = {"order": np.nan, "extrapolated": np.nan, "gci_fine": np.nan, "r21": r21, "r32": r32,
-           "monotone": bool(e21 * e32 > 0)}
+    out = {
+        "order": np.nan,
+        "extrapolated": np.nan,
+        "gci_fine": np.nan,
+        "r21": r21,
+        "r32": r32,
+        "monotone": bool(e21 * e32 > 0),
+    }
     if e21 == 0 or e32 == 0:
         return out
     s = np.sign(e32 / e21)
@@ -172,8 +198,9 @@ def richardson(h: np.ndarray, phi: np.ndarray, safety: float = 1.25) -> dict:
         if abs(p_new - p) < 1e-12:
             break
         p = p_new
-    out.update(order=p, extrapolated=(r21**p * f1 - f2) / (r21**p - 1.0),
-               gci_fine=safety * abs(e21 / f1) / (r21**p - 1.0))
+    out.update(
+        order=p, extrapolated=(r21**p * f1 - f2) / (r21**p - 1.0), gci_fine=safety * abs(e21 / f1) / (r21**p - 1.0)
+    )
     return out
 
 
@@ -181,8 +208,13 @@ def convergence_table(df):
     """Richardson figures of the 3D free angle with contact at the full load, one row per mesh."""
     if not {"code", "dim", "case", "contact", "status"} <= set(df.columns):
         return None
-    sel = df[(df.code == "workflow.fem") & (df.dim == 3) & (df.case == "free") & (df.contact == True)  # noqa: E712
-             & (df.status == 0)].sort_values("h_eff_mm")
+    sel = df[
+        (df.code == "workflow.fem")
+        & (df.dim == 3)
+        & (df.case == "free")
+        & (df.contact == True)  # noqa: E712
+        & (df.status == 0)
+    ].sort_values("h_eff_mm")
     if len(sel) < 3:
         return None
     sel = sel.iloc[:3]
@@ -196,6 +228,7 @@ def convergence_table(df):
 
 def to_markdown(df, floatfmt: str = "{:.4g}") -> str:
     """A plain GitHub markdown table (no extra dependency)."""
+
     def fmt(v):
         if isinstance(v, (float, np.floating)):
             return "" if np.isnan(v) else floatfmt.format(v)
@@ -206,10 +239,35 @@ def to_markdown(df, floatfmt: str = "{:.4g}") -> str:
     return "\n".join(lines) + "\n"
 
 
-COLUMNS = ["code", "dim", "h_mm", "h_eff_mm", "contact", "case", "ndofs", "status", "load_factor", "wall_time_s",
-           "assembly_time_s", "solve_time_s", "newton_iterations", "steps", "cutbacks", "n_tangent", "n_residual",
-           "t_solid_tangent_s", "t_solid_s", "t_contact_s", "t_pressure_s", "t_reduce_s", "analyses",
-           "bending_angle_deg", "bending_moment_nm", "max_penetration_mm", "peak_rss_mb"]
+COLUMNS = [
+    "code",
+    "dim",
+    "h_mm",
+    "h_eff_mm",
+    "contact",
+    "case",
+    "ndofs",
+    "status",
+    "load_factor",
+    "wall_time_s",
+    "assembly_time_s",
+    "solve_time_s",
+    "newton_iterations",
+    "steps",
+    "cutbacks",
+    "n_tangent",
+    "n_residual",
+    "t_solid_tangent_s",
+    "t_solid_s",
+    "t_contact_s",
+    "t_pressure_s",
+    "t_reduce_s",
+    "analyses",
+    "bending_angle_deg",
+    "bending_moment_nm",
+    "max_penetration_mm",
+    "peak_rss_mb",
+]
 
 
 def main():
@@ -219,8 +277,9 @@ def main():
     ap.add_argument("--h2", type=float, nargs="*", default=None, help="2D element sizes (mm)")
     ap.add_argument("--h3", type=float, nargs="*", default=None, help="3D element sizes (mm)")
     ap.add_argument("--threads", type=int, default=1, help="MKL / BLAS threads per case")
-    ap.add_argument("--felupe-steps", type=int, default=20,
-                    help="FElupe substeps (its cut-back subdivides a substep that fails)")
+    ap.add_argument(
+        "--felupe-steps", type=int, default=20, help="FElupe substeps (its cut-back subdivides a substep that fails)"
+    )
     ap.add_argument("--no-felupe", action="store_true")
     ap.add_argument("--only-3d-free-contact", action="store_true", help="the Richardson solves only")
     ap.add_argument("--tag", default="bench_fem", help="output file stem in benchmarks/out")

@@ -1,4 +1,4 @@
-"""Timing of the OpenSim backend (issue 3, item 6). Not a test: run it by hand.
+"""Timing of the OpenSim backend. Not a test: run it by hand.
 
     python benchmarks/bench_opensim.py [--repeats 200] [--processes 2]
 
@@ -44,8 +44,11 @@ def one_evaluation(model_path: Path, table: pd.DataFrame, repeats: int) -> float
     ob.scale_model(model, _factors(table, "Original"), FINGERS)
     state = model.initSystem()
     coord = model.getCoordinateSet().get(om.joint_coordinate_name("F3", "MCP"))
-    muscles = [m for m in (model.getMuscles().get(i) for i in range(model.getMuscles().getSize()))
-               if m.getName().startswith("F3_")]
+    muscles = [
+        m
+        for m in (model.getMuscles().get(i) for i in range(model.getMuscles().getSize()))
+        if m.getName().startswith("F3_")
+    ]
     structures = ob._joint_structures(model, "F3")["MCP"]
     times = []
     for k in range(repeats):
@@ -87,7 +90,11 @@ def main() -> None:
         with get_context("spawn").Pool(args.processes) as pool:
             per_job = pool.map(_run_job, jobs)
         t_all = time.perf_counter() - t0
-    n = len(FINGERS) * sum(len([a for a in ob.angle_grid() if lo <= a <= hi]) for lo, hi in om.JOINT_RANGE_DEG.values()) * 2
+    n = (
+        len(FINGERS)
+        * sum(len([a for a in ob.angle_grid() if lo <= a <= hi]) for lo, hi in om.JOINT_RANGE_DEG.values())
+        * 2
+    )
     print(f"build + write reference model (4 fingers): {t_model:8.3f} s")
     print(f"one moment evaluation (equilibrate + moment): {t_eval * 1e3:8.3f} ms (median of {args.repeats})")
     print(f"one CCD run in-process ({n} samples): {t_run:8.3f} s")

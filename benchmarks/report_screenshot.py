@@ -1,4 +1,4 @@
-"""Headless check of the run report (issue 7 item 4): screenshots and an inventory of its sections.
+"""Headless check of the run report: screenshots and an inventory of its sections.
 
 Usage (after ``snakemake --report report.html``)::
 
@@ -30,20 +30,38 @@ import tempfile
 from pathlib import Path
 
 #: Sections the report must have (categories of the report() outputs).
-EXPECTED = ("Musculoskeletal", "Patients", "Actuator", "Cascade", "Tables", "Stability maps", "FEA check",
-            "Speed and accuracy")
+EXPECTED = (
+    "Musculoskeletal",
+    "Patients",
+    "Actuator",
+    "Cascade",
+    "Tables",
+    "Stability maps",
+    "FEA check",
+    "Speed and accuracy",
+)
 #: Sections another stage adds later; reported, not required.
 OPTIONAL: tuple[str, ...] = ()
 
 # the machine's network is closed: no background connections, no updates, no sync, a fresh profile per call
-_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--virtual-time-budget=20000",
-          "--disable-quic", "--no-first-run", "--disable-background-networking", "--disable-component-update",
-          "--disable-sync"]
+_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--hide-scrollbars",
+    "--virtual-time-budget=20000",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 def chrome() -> str:
-    exe = os.environ.get("CHROME") or next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome")
-                                            if shutil.which(n)), None)
+    exe = os.environ.get("CHROME") or next(
+        (shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None
+    )
     if not exe:
         sys.exit("no Chromium found: apt-get install -y chromium (or set CHROME)")
     return exe
@@ -52,7 +70,11 @@ def chrome() -> str:
 def with_script(report: str, js: str, tmp: Path, name: str) -> Path:
     """A copy of the report with ``js`` run 0.5 s after load (the app renders first)."""
     i = report.rfind("</body>")
-    page = report[:i] + f"<script>window.addEventListener('load', () => setTimeout(() => {{{js}}}, 500));</script>" + report[i:]
+    page = (
+        report[:i]
+        + f"<script>window.addEventListener('load', () => setTimeout(() => {{{js}}}, 500));</script>"
+        + report[i:]
+    )
     out = tmp / f"{name}.html"
     out.write_text(page, encoding="utf-8")
     return out
@@ -68,12 +90,14 @@ def run(exe: str, page: Path, *, screenshot: Path | None = None, size=(1500, 130
 
 def inventory(exe: str, report: str, tmp: Path) -> dict:
     """The report's sections and results, read from the app's own data in the browser."""
-    js = ("const inv = {}; for (const [c, subs] of Object.entries(categories)) { inv[c] = {};"
-          " for (const [s, paths] of Object.entries(subs)) { inv[c][s] = paths.map(p => ({path: p,"
-          " mime: results[p].mime_type, caption: (results[p].caption || '').length > 0, rule:"
-          " results[p].job_properties.rule})); } }"
-          " const pre = document.createElement('pre'); pre.id = 'inventory';"
-          " pre.textContent = JSON.stringify(inv); document.body.appendChild(pre);")
+    js = (
+        "const inv = {}; for (const [c, subs] of Object.entries(categories)) { inv[c] = {};"
+        " for (const [s, paths] of Object.entries(subs)) { inv[c][s] = paths.map(p => ({path: p,"
+        " mime: results[p].mime_type, caption: (results[p].caption || '').length > 0, rule:"
+        " results[p].job_properties.rule})); } }"
+        " const pre = document.createElement('pre'); pre.id = 'inventory';"
+        " pre.textContent = JSON.stringify(inv); document.body.appendChild(pre);"
+    )
     dom = run(exe, with_script(report, js, tmp, "inventory"))
     m = re.search(r'<pre id="inventory">(.*?)</pre>', dom, re.S)
     if not m:
@@ -88,8 +112,10 @@ def show(path: str, mime: str) -> str:
     kind = "img" if mime.startswith("image/") else "html" if mime == "text/html" else None
     if kind is None:  # e.g. netCDF: only its info panel
         return f"app.showResultInfo({json.dumps(path)});"
-    return (f"app.setView({{content: '{kind}', contentPath: results[{json.dumps(path)}].data_uri,"
-            f" resultPath: {json.dumps(path)}}});")
+    return (
+        f"app.setView({{content: '{kind}', contentPath: results[{json.dumps(path)}].data_uri,"
+        f" resultPath: {json.dumps(path)}}});"
+    )
 
 
 def main(argv=None) -> int:
@@ -122,8 +148,10 @@ def main(argv=None) -> int:
     no_caption = [e["path"] for subs in inv.values() for s in subs.values() for e in s if not e["caption"]]
     for cat, subs in sorted(inv.items()):
         n = sum(len(s) for s in subs.values())
-        print(f"{cat}: {n} results in {len(subs)} subsection(s): "
-              + "; ".join(f"{s}: " + ", ".join(Path(e['path']).name for e in es) for s, es in subs.items()))
+        print(
+            f"{cat}: {n} results in {len(subs)} subsection(s): "
+            + "; ".join(f"{s}: " + ", ".join(Path(e["path"]).name for e in es) for s, es in subs.items())
+        )
     for c in OPTIONAL:
         print(f"{c}: {'present' if c in inv else 'not in this run (optional)'}")
     if missing or no_caption:

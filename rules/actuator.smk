@@ -11,35 +11,44 @@ rule unit_check:
     output:
         nc=report("results/actuator/unit_check.nc", caption="../report/unit_check.rst", category="Actuator"),
         vtu="results/actuator/unit_3d_300kpa.vtu",
-    params:
-        actuator=config["actuator"],
-        config_slice=cfg("actuator"),
     log:
         "logs/actuator/unit_check.log",
     benchmark:
         "results/benchmarks/rules/unit_check.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        actuator=config["actuator"],
+        config_slice=cfg("actuator"),
     script:
         "../workflow/scripts/unit_check.py"
 
 
 # Unit under an external end moment: FEA
-# couples at prescribed end rotations against workflow/unit_model.py.
+# couples at prescribed end rotations against workflow/actuator/unit_model.py.
 rule unit_moment_check:
     input:
         code=code_files("scripts.unit_moment_check"),
     output:
-        nc=report("results/actuator/unit_moment_check.nc", caption="../report/unit_moment_check.rst", category="Actuator"),
-        plot=report("results/actuator/unit_moment_check.png", caption="../report/unit_moment_check.rst", category="Actuator"),
-    params:
-        actuator=config["actuator"],
-        unit_model=config["surrogates"]["unit_model"],
-        config_slice={"actuator": config["actuator"], "surrogates": {"unit_model": config["surrogates"]["unit_model"]}},
+        nc=report(
+            "results/actuator/unit_moment_check.nc", caption="../report/unit_moment_check.rst", category="Actuator"
+        ),
+        plot=report(
+            "results/actuator/unit_moment_check.png", caption="../report/unit_moment_check.rst", category="Actuator"
+        ),
     log:
         "logs/actuator/unit_moment_check.log",
     benchmark:
         "results/benchmarks/rules/unit_moment_check.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        actuator=config["actuator"],
+        unit_model=config["surrogates"]["unit_model"],
+        config_slice={"actuator": config["actuator"], "surrogates": {"unit_model": config["surrogates"]["unit_model"]}},
     script:
         "../workflow/scripts/unit_moment_check.py"
+
 
 rule sweep_shard:
     input:
@@ -47,17 +56,19 @@ rule sweep_shard:
         code=code_files("scripts.sweep_shard"),
     output:
         "results/actuator/sweep/{fea}/shard{shard}.nc",
-    wildcard_constraints:
-        fea="2d|3d",
-        shard=r"\d+",
-    params:
-        sweep=get_sweep_params,
-        actuator=config.get("actuator", {}),
-        config_slice=get_sweep_slice,
     log:
         "logs/surrogates/sweep_shard/{fea}_{shard}.log",
     benchmark:
         "results/benchmarks/rules/sweep_shard_{fea}_{shard}.tsv"
+    wildcard_constraints:
+        fea="2d|3d",
+        shard=r"\d+",
+    conda:
+        "../envs/project.yaml"
+    params:
+        sweep=get_sweep_params,
+        actuator=config.get("actuator", {}),
+        config_slice=get_sweep_slice,
     script:
         "../workflow/scripts/sweep_shard.py"
 
@@ -68,15 +79,17 @@ rule sweep_merge:
         code=code_files("scripts.sweep_merge"),
     output:
         "results/actuator/response_{fea}.nc",
-    wildcard_constraints:
-        fea="2d|3d",
-    params:
-        sweep=get_sweep_params,
-        config_slice=get_sweep_slice,
     log:
         "logs/surrogates/sweep_merge/{fea}.log",
     benchmark:
         "results/benchmarks/rules/sweep_merge_{fea}.tsv"
+    wildcard_constraints:
+        fea="2d|3d",
+    conda:
+        "../envs/project.yaml"
+    params:
+        sweep=get_sweep_params,
+        config_slice=get_sweep_slice,
     script:
         "../workflow/scripts/sweep_merge.py"
 
@@ -89,16 +102,18 @@ rule surrogate_cv:
     output:
         cv="results/actuator/surrogate_cv.nc",
         plot=report("results/actuator/surrogate_cv.png", caption="../report/surrogate_cv.rst", category="Actuator"),
-    params:
-        surrogates=config["surrogates"],
-        # fidelity.auto: the fastest regressor within the tolerance (else the best CV score)
-        tolerance=config["fidelity"]["tolerance"]["surrogate_score"] if config["fidelity"]["auto"] else None,
-        config_slice=cfg("sweep", "surrogates") | {"auto": config["fidelity"]["auto"],
-                                                   "tolerance": config["fidelity"]["tolerance"]["surrogate_score"]},
     log:
         "logs/surrogates/surrogate_cv.log",
     benchmark:
         "results/benchmarks/rules/surrogate_cv.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        surrogates=config["surrogates"],
+        # fidelity.auto: the fastest regressor within the tolerance (else the best CV score)
+        tolerance=config["fidelity"]["tolerance"]["surrogate_score"] if config["fidelity"]["auto"] else None,
+        config_slice=cfg("sweep", "surrogates")
+        | {"auto": config["fidelity"]["auto"], "tolerance": config["fidelity"]["tolerance"]["surrogate_score"]},
     script:
         "../workflow/scripts/surrogate_cv.py"
 
@@ -115,14 +130,16 @@ rule surrogate_fit:
             caption="../report/surrogate_response.rst",
             category="Actuator",
         ),
-    wildcard_constraints:
-        fea="2d|3d",
-    params:
-        surrogates=config["surrogates"],
     log:
         "logs/surrogates/surrogate_fit/{fea}.log",
     benchmark:
         "results/benchmarks/rules/surrogate_fit_{fea}.tsv"
+    wildcard_constraints:
+        fea="2d|3d",
+    conda:
+        "../envs/project.yaml"
+    params:
+        surrogates=config["surrogates"],
     script:
         "../workflow/scripts/surrogate_fit.py"
 
@@ -140,12 +157,14 @@ rule mapping_2d3d:
             caption="../report/surrogate_mapping.rst",
             category="Actuator",
         ),
-    params:
-        pressure_limit=get_pressure_limit(),
-        config_slice=cfg("sweep", "surrogates") | {"pressure_limit": get_pressure_limit()},
     log:
         "logs/surrogates/mapping_2d3d.log",
     benchmark:
         "results/benchmarks/rules/mapping_2d3d.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        pressure_limit=get_pressure_limit(),
+        config_slice=cfg("sweep", "surrogates") | {"pressure_limit": get_pressure_limit()},
     script:
         "../workflow/scripts/mapping_2d3d.py"

@@ -20,6 +20,12 @@ rule cascade_plan:
             category="Cascade",
             subcategory="{patient}",
         ),
+    log:
+        "logs/cascade/cascade_plan/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/cascade_plan_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         patient=get_patient,
         cascade=config["cascade"],
@@ -27,10 +33,6 @@ rule cascade_plan:
         unit_model=config["surrogates"]["unit_model"],
         pressure_limit=get_pressure_limit(),
         config_slice=get_cascade_slice,
-    log:
-        "logs/cascade/cascade_plan/{patient}.log",
-    benchmark:
-        "results/benchmarks/rules/cascade_plan_{patient}.tsv"
     script:
         "../workflow/scripts/cascade_plan.py"
 
@@ -49,12 +51,14 @@ rule validate_cascade:
             caption="../report/cascade_validation.rst",
             category="Cascade",
         ),
-    params:
-        rel_floor_kpa=config["cascade"]["rel_floor_kpa"],
-        config_slice=cfg("cascade"),
     log:
         "logs/cascade/validate_cascade.log",
     benchmark:
         "results/benchmarks/rules/validate_cascade.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        rel_floor_kpa=config["cascade"]["rel_floor_kpa"],
+        config_slice=cfg("cascade"),
     script:
         "../workflow/scripts/cascade_validate.py"

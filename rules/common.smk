@@ -70,14 +70,21 @@ def get_final_output():
     if Path(config["cascade"]["section_points"]).is_file():
         out += [f"results/patients/{vp}/fea_check.nc"]
     else:
-        logger.warning(f"FEA check left out: finger section points {config['cascade']['section_points']} "
-                       "not found (set cascade.section_points)")
+        logger.warning(
+            f"FEA check left out: finger section points {config['cascade']['section_points']} "
+            "not found (set cascade.section_points)"
+        )
     # Stability maps, speed against accuracy and the report's plots and tables.
     out += ["results/stability/stability.nc", "results/musculoskeletal/moment_angle.png"]
-    out += ["results/benchmarks/speed_accuracy.nc", "results/report/speed_accuracy.html",
-            "results/report/fidelity_choices.html"]
-    out += expand("results/report/{table}.html", table=["scaling", "musculoskeletal", "unit_check", "surrogate_cv",
-                                                       "mapping", "cascade_validation"])
+    out += [
+        "results/benchmarks/speed_accuracy.nc",
+        "results/report/speed_accuracy.html",
+        "results/report/fidelity_choices.html",
+    ]
+    out += expand(
+        "results/report/{table}.html",
+        table=["scaling", "musculoskeletal", "unit_check", "surrogate_cv", "mapping", "cascade_validation"],
+    )
     out += expand("results/patients/{patient}/{table}.html", patient=PATIENTS, table=["joint_loads", "cascade_plan"])
     return out
 
@@ -203,7 +210,9 @@ def get_opensim_model(wildcards):
 
 def get_msk_choice(wildcards):
     """Input function: the musculoskeletal study (and model) a patient's loads choose from, when fidelity.auto."""
-    return {"msk_study": "results/fidelity/musculoskeletal.nc", **get_opensim_model(wildcards)} if fidelity_auto() else {}
+    return (
+        {"msk_study": "results/fidelity/musculoskeletal.nc", **get_opensim_model(wildcards)} if fidelity_auto() else {}
+    )
 
 
 def get_check_choice(wildcards):
@@ -214,8 +223,11 @@ def get_check_choice(wildcards):
 def get_speed_accuracy_inputs(wildcards):
     """Input function: the validation patient's plan inputs and check study (when the section points exist)."""
     vp = config["cascade"]["validation_patient"]
-    out = {"joint_loads": f"results/patients/{vp}/joint_loads.nc", "moments_all": "results/musculoskeletal/moments.nc",
-           "ccd": "results/doe/ccd.nc"}
+    out = {
+        "joint_loads": f"results/patients/{vp}/joint_loads.nc",
+        "moments_all": "results/musculoskeletal/moments.nc",
+        "ccd": "results/doe/ccd.nc",
+    }
     if Path(config["cascade"]["section_points"]).is_file():
         out["check"] = f"results/patients/{vp}/fidelity_check.nc"
     return out
@@ -224,9 +236,12 @@ def get_speed_accuracy_inputs(wildcards):
 def get_fidelity_choice_inputs(wildcards):
     """Input function: the outputs whose attrs say which fidelity they used (unit check, responses,
     surrogate CV, every patient's loads, the validation patient's FEA check)."""
-    out = {"unit_check": "results/actuator/unit_check.nc", "cv": "results/actuator/surrogate_cv.nc",
-           "responses": expand("results/actuator/response_{fea}.nc", fea=["2d", "3d"]),
-           "loads": expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS)}
+    out = {
+        "unit_check": "results/actuator/unit_check.nc",
+        "cv": "results/actuator/surrogate_cv.nc",
+        "responses": expand("results/actuator/response_{fea}.nc", fea=["2d", "3d"]),
+        "loads": expand("results/patients/{patient}/joint_loads.nc", patient=PATIENTS),
+    }
     if Path(config["cascade"]["section_points"]).is_file():
         out["fea_check"] = f"results/patients/{config['cascade']['validation_patient']}/fea_check.nc"
     return out

@@ -6,12 +6,14 @@ rule ccd:
         code=code_files("scripts.ccd"),
     output:
         "results/doe/ccd.nc",
-    params:
-        design=config["design"],
     log:
         "logs/doe/ccd.log",
     benchmark:
         "results/benchmarks/rules/ccd.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        design=config["design"],
     script:
         "../workflow/scripts/ccd.py"
 
@@ -22,13 +24,15 @@ rule scaling:
         code=code_files("scripts.scaling"),
     output:
         "results/doe/scaling.nc",
-    params:
-        scaling=config["scaling"],
-        anthropometry=config["anthropometry"],
     log:
         "logs/doe/scaling.log",
     benchmark:
         "results/benchmarks/rules/scaling.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        scaling=config["scaling"],
+        anthropometry=config["anthropometry"],
     script:
         "../workflow/scripts/scaling.py"
 
@@ -44,5 +48,7 @@ rule validate_scaling:
         "logs/validation/scaling.log",
     benchmark:
         "results/benchmarks/rules/validate_scaling.tsv"
+    conda:
+        "../envs/project.yaml"
     script:
         "../workflow/scripts/validate_scaling.py"

@@ -25,6 +25,12 @@ rule fea_check:
             category="FEA check",
             subcategory="{patient}",
         ),
+    log:
+        "logs/fea_check/fea_check/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/fea_check_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         patient=get_patient,
         fea_check=config["fea_check"],
@@ -33,11 +39,8 @@ rule fea_check:
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         tolerance_deg=config["fidelity"]["tolerance"]["check_deg"],
-        config_slice=lambda wc: get_fea_check_slice(wc) | {"check_tolerance_deg": config["fidelity"]["tolerance"]["check_deg"]},
-    log:
-        "logs/fea_check/fea_check/{patient}.log",
-    benchmark:
-        "results/benchmarks/rules/fea_check_{patient}.tsv"
+        config_slice=lambda wc: get_fea_check_slice(wc)
+        | {"check_tolerance_deg": config["fidelity"]["tolerance"]["check_deg"]},
     script:
         "../workflow/scripts/fea_check.py"
 
@@ -55,14 +58,16 @@ rule standalone_actuator:
             category="FEA check",
             subcategory="{patient}",
         ),
+    log:
+        "logs/fea_check/standalone_actuator/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/standalone_actuator_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         fea_check=config["fea_check"],
         actuator=config["actuator"],
         cascade=config["cascade"],
         config_slice=get_fea_check_slice,
-    log:
-        "logs/fea_check/standalone_actuator/{patient}.log",
-    benchmark:
-        "results/benchmarks/rules/standalone_actuator_{patient}.tsv"
     script:
         "../workflow/scripts/standalone_actuator.py"

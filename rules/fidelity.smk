@@ -16,17 +16,22 @@ rule fidelity_fem:
         code=code_files("scripts.fidelity_fem"),
     output:
         "results/fidelity/fem/{case}.nc",
-    wildcard_constraints:
-        case=r"fem_(2d|3d)_h[0-9.]+_(contact|nocontact)",
-    params:
-        actuator=config["actuator"],
-        p_top_kpa=config["fidelity"]["p_top_kpa"],
-        config_slice=lambda wc: {"case": wc.case, "actuator": config["actuator"],
-                                 "p_top_kpa": config["fidelity"]["p_top_kpa"]},
     log:
         "logs/fidelity/fidelity_fem/{case}.log",
     benchmark:
         "results/benchmarks/rules/fidelity_fem_{case}.tsv"
+    wildcard_constraints:
+        case=r"fem_(2d|3d)_h[0-9.]+_(contact|nocontact)",
+    conda:
+        "../envs/project.yaml"
+    params:
+        actuator=config["actuator"],
+        p_top_kpa=config["fidelity"]["p_top_kpa"],
+        config_slice=lambda wc: {
+            "case": wc.case,
+            "actuator": config["actuator"],
+            "p_top_kpa": config["fidelity"]["p_top_kpa"],
+        },
     script:
         "../workflow/scripts/fidelity_fem.py"
 
@@ -37,13 +42,15 @@ rule fidelity_fem_choice:
         code=code_files("scripts.fidelity_fem_choice"),
     output:
         "results/fidelity/fem.nc",
-    params:
-        tolerance={q: config["fidelity"]["tolerance"][f"fem_{q}_rel"] for q in ("angle", "moment")},
-        config_slice={"fidelity": {k: config["fidelity"][k] for k in ("fem_cases", "p_top_kpa", "tolerance")}},
     log:
         "logs/fidelity/fidelity_fem_choice.log",
     benchmark:
         "results/benchmarks/rules/fidelity_fem_choice.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        tolerance={q: config["fidelity"]["tolerance"][f"fem_{q}_rel"] for q in ("angle", "moment")},
+        config_slice={"fidelity": {k: config["fidelity"][k] for k in ("fem_cases", "p_top_kpa", "tolerance")}},
     script:
         "../workflow/scripts/fidelity_fem_choice.py"
 
@@ -57,6 +64,12 @@ rule fidelity_msk:
         code=code_files("scripts.fidelity_msk"),
     output:
         "results/fidelity/musculoskeletal.nc",
+    log:
+        "logs/fidelity/fidelity_msk.log",
+    benchmark:
+        "results/benchmarks/rules/fidelity_msk.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         points=config["fidelity"]["msk_points"],
         exercises=config["exercises"],
@@ -64,10 +77,6 @@ rule fidelity_msk:
         anthropometry=config["anthropometry"],
         config_slice=cfg("exercises", "scaling", "anthropometry", "musculoskeletal", "rsm")
         | {"msk_points": config["fidelity"]["msk_points"]},
-    log:
-        "logs/fidelity/fidelity_msk.log",
-    benchmark:
-        "results/benchmarks/rules/fidelity_msk.tsv"
     script:
         "../workflow/scripts/fidelity_msk.py"
 
@@ -82,6 +91,12 @@ rule fidelity_check:
         code=code_files("scripts.fidelity_check"),
     output:
         "results/patients/{patient}/fidelity_check.nc",
+    log:
+        "logs/fidelity/fidelity_check/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/fidelity_check_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         patient=get_patient,
         check=config["fidelity"]["check"],
@@ -91,10 +106,6 @@ rule fidelity_check:
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         config_slice=lambda wc: {**get_fea_check_slice(wc), "check": config["fidelity"]["check"]},
-    log:
-        "logs/fidelity/fidelity_check/{patient}.log",
-    benchmark:
-        "results/benchmarks/rules/fidelity_check_{patient}.tsv"
     script:
         "../workflow/scripts/fidelity_check.py"
 
@@ -110,8 +121,17 @@ rule speed_accuracy:
         code=code_files("scripts.speed_accuracy"),
     output:
         nc="results/benchmarks/speed_accuracy.nc",
-        plot=report("results/benchmarks/speed_accuracy.png", caption="../report/speed_accuracy.rst",
-                    category="Speed and accuracy"),
+        plot=report(
+            "results/benchmarks/speed_accuracy.png",
+            caption="../report/speed_accuracy.rst",
+            category="Speed and accuracy",
+        ),
+    log:
+        "logs/fidelity/speed_accuracy.log",
+    benchmark:
+        "results/benchmarks/rules/speed_accuracy.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         surrogates=config["surrogates"],
         patient=lambda wc: config["patients"][config["cascade"]["validation_patient"]],
@@ -119,10 +139,6 @@ rule speed_accuracy:
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         config_slice=cfg("fidelity", "surrogates", "cascade"),
-    log:
-        "logs/fidelity/speed_accuracy.log",
-    benchmark:
-        "results/benchmarks/rules/speed_accuracy.tsv"
     script:
         "../workflow/scripts/speed_accuracy.py"
 
@@ -132,14 +148,19 @@ rule speed_accuracy_table:
         dataset="results/benchmarks/speed_accuracy.nc",
         code=code_files("scripts.report_table"),
     output:
-        report("results/report/speed_accuracy.html", caption="../report/speed_accuracy_table.rst",
-               category="Speed and accuracy"),
-    params:
-        table="speed_accuracy",
+        report(
+            "results/report/speed_accuracy.html",
+            caption="../report/speed_accuracy_table.rst",
+            category="Speed and accuracy",
+        ),
     log:
         "logs/report/speed_accuracy_table.log",
     benchmark:
         "results/benchmarks/rules/speed_accuracy_table.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        table="speed_accuracy",
     script:
         "../workflow/scripts/report_table.py"
 
@@ -149,11 +170,16 @@ rule fidelity_choices:
         unpack(get_fidelity_choice_inputs),
         code=code_files("scripts.fidelity_choices"),
     output:
-        report("results/report/fidelity_choices.html", caption="../report/fidelity_choices.rst",
-               category="Speed and accuracy"),
+        report(
+            "results/report/fidelity_choices.html",
+            caption="../report/fidelity_choices.rst",
+            category="Speed and accuracy",
+        ),
     log:
         "logs/report/fidelity_choices.log",
     benchmark:
         "results/benchmarks/rules/fidelity_choices.tsv"
+    conda:
+        "../envs/project.yaml"
     script:
         "../workflow/scripts/fidelity_choices.py"

@@ -15,6 +15,8 @@ rule joint_moments_table:
         "logs/musculoskeletal/joint_moments_table.log",
     benchmark:
         "results/benchmarks/rules/joint_moments_table.tsv"
+    conda:
+        "../envs/project.yaml"
     script:
         "../workflow/scripts/joint_moments_table.py"
 
@@ -25,12 +27,14 @@ rule joint_moments:
         code=code_files("scripts.joint_moments"),
     output:
         "results/musculoskeletal/moments.nc",
-    params:
-        backend=config["musculoskeletal"]["backend"],
     log:
         "logs/musculoskeletal/joint_moments.log",
     benchmark:
         "results/benchmarks/rules/joint_moments.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        backend=config["musculoskeletal"]["backend"],
     script:
         "../workflow/scripts/joint_moments.py"
 
@@ -43,13 +47,15 @@ rule rsm:
     output:
         rsm="results/musculoskeletal/rsm.nc",
         plot=report("results/musculoskeletal/rsm_r2.png", caption="../report/rsm.rst", category="Musculoskeletal"),
-    params:
-        exercises=config["exercises"],
-        alpha=config["rsm"]["alpha"],
     log:
         "logs/musculoskeletal/rsm.log",
     benchmark:
         "results/benchmarks/rules/rsm.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        exercises=config["exercises"],
+        alpha=config["rsm"]["alpha"],
     script:
         "../workflow/scripts/rsm.py"
 
@@ -69,6 +75,12 @@ rule patient_loads:
             category="Patients",
             subcategory="{patient}",
         ),
+    log:
+        "logs/patients/{patient}/patient_loads.log",
+    benchmark:
+        "results/benchmarks/rules/patient_loads_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         patient=get_patient,
         exercises=config["exercises"],
@@ -76,14 +88,15 @@ rule patient_loads:
         prediction_alpha=config["rsm"]["prediction_alpha"],
         tolerance=config["fidelity"]["tolerance"]["msk_rel"],
         scaling=config["scaling"],
-        config_slice=lambda wc: patient_cfg(wc) | ({"fidelity": {"tolerance": config["fidelity"]["tolerance"]["msk_rel"],
-                                                                 "scaling": config["scaling"]}} if config["fidelity"]["auto"] else {}),
-    log:
-        "logs/patients/{patient}/patient_loads.log",
-    benchmark:
-        "results/benchmarks/rules/patient_loads_{patient}.tsv"
+        config_slice=lambda wc: patient_cfg(wc)
+        | (
+            {"fidelity": {"tolerance": config["fidelity"]["tolerance"]["msk_rel"], "scaling": config["scaling"]}}
+            if config["fidelity"]["auto"]
+            else {}
+        ),
     script:
         "../workflow/scripts/patient_loads.py"
+
 
 rule opensim_model:
     input:
@@ -92,13 +105,15 @@ rule opensim_model:
         code=code_files("scripts.opensim_model"),
     output:
         "results/musculoskeletal/opensim/finger_reference.osim",
-    params:
-        fingers=config["opensim"]["fingers"],
-        reference_marker=config["opensim"]["reference_marker"],
     log:
         "logs/opensim/opensim_model.log",
     benchmark:
         "results/benchmarks/rules/opensim_model.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        fingers=config["opensim"]["fingers"],
+        reference_marker=config["opensim"]["reference_marker"],
     script:
         "../workflow/scripts/opensim_model.py"
 
@@ -110,18 +125,20 @@ rule opensim_sample:
         code=code_files("scripts.opensim_sample"),
     output:
         "results/musculoskeletal/opensim/run{run}.nc",
+    log:
+        "logs/opensim/opensim_sample_{run}.log",
+    benchmark:
+        "results/benchmarks/rules/opensim_sample_{run}.tsv"
+    wildcard_constraints:
+        run=r"\d+",
+    conda:
+        "../envs/project.yaml"
     params:
         fingers=config["opensim"]["fingers"],
         angle_step_deg=config["opensim"]["angle_step_deg"],
         activations=config["opensim"]["activations"],
         include_gravity=config["opensim"]["include_gravity"],
         config_slice=cfg("opensim", "scaling", "anthropometry", "design"),
-    wildcard_constraints:
-        run=r"\d+",
-    log:
-        "logs/opensim/opensim_sample_{run}.log",
-    benchmark:
-        "results/benchmarks/rules/opensim_sample_{run}.tsv"
     script:
         "../workflow/scripts/opensim_sample.py"
 
@@ -133,12 +150,14 @@ rule opensim_merge:
         code=code_files("scripts.opensim_merge"),
     output:
         "results/musculoskeletal/moments_opensim.nc",
-    params:
-        config_slice=cfg("opensim", "scaling", "anthropometry", "design"),
     log:
         "logs/opensim/opensim_merge.log",
     benchmark:
         "results/benchmarks/rules/opensim_merge.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        config_slice=cfg("opensim", "scaling", "anthropometry", "design"),
     script:
         "../workflow/scripts/opensim_merge.py"
 
@@ -155,13 +174,15 @@ rule opensim_validate:
             caption="../report/opensim_validation.rst",
             category="Musculoskeletal",
         ),
-    params:
-        # A param, not an input: the export is optional (the rule then writes an empty comparison).
-        reference=config["opensim"]["reference_path"],
-        config_slice=cfg("opensim"),
     log:
         "logs/opensim/opensim_validate.log",
     benchmark:
         "results/benchmarks/rules/opensim_validate.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        # A param, not an input: the export is optional (the rule then writes an empty comparison).
+        reference=config["opensim"]["reference_path"],
+        config_slice=cfg("opensim"),
     script:
         "../workflow/scripts/opensim_validate.py"

@@ -9,12 +9,17 @@ rule moment_angle_plot:
         moments="results/musculoskeletal/moments.nc",
         code=code_files("scripts.moment_angle_plot"),
     output:
-        report("results/musculoskeletal/moment_angle.png", caption="../report/moment_angle.rst",
-               category="Musculoskeletal"),
+        report(
+            "results/musculoskeletal/moment_angle.png",
+            caption="../report/moment_angle.rst",
+            category="Musculoskeletal",
+        ),
     log:
         "logs/report/moment_angle_plot.log",
     benchmark:
         "results/benchmarks/rules/moment_angle_plot.tsv"
+    conda:
+        "../envs/project.yaml"
     script:
         "../workflow/scripts/moment_angle_plot.py"
 
@@ -32,12 +37,14 @@ rule report_table:
         code=code_files("scripts.report_table"),
     output:
         report("results/report/{table}.html", caption="../report/tables.rst", category="Tables"),
-    wildcard_constraints:
-        table="scaling|musculoskeletal|unit_check|surrogate_cv|mapping|cascade_validation",
     log:
         "logs/report/report_table_{table}.log",
     benchmark:
         "results/benchmarks/rules/report_table_{table}.tsv"
+    wildcard_constraints:
+        table="scaling|musculoskeletal|unit_check|surrogate_cv|mapping|cascade_validation",
+    conda:
+        "../envs/project.yaml"
     script:
         "../workflow/scripts/report_table.py"
 
@@ -47,14 +54,20 @@ rule joint_loads_table:
         dataset="results/patients/{patient}/joint_loads.nc",
         code=code_files("scripts.report_table"),
     output:
-        report("results/patients/{patient}/joint_loads.html", caption="../report/tables.rst",
-               category="Patients", subcategory="{patient}"),
-    params:
-        table="joint_loads",
+        report(
+            "results/patients/{patient}/joint_loads.html",
+            caption="../report/tables.rst",
+            category="Patients",
+            subcategory="{patient}",
+        ),
     log:
         "logs/report/joint_loads_table_{patient}.log",
     benchmark:
         "results/benchmarks/rules/joint_loads_table_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        table="joint_loads",
     script:
         "../workflow/scripts/report_table.py"
 
@@ -64,13 +77,19 @@ rule cascade_plan_table:
         dataset="results/patients/{patient}/cascade_plan.nc",
         code=code_files("scripts.report_table"),
     output:
-        report("results/patients/{patient}/cascade_plan.html", caption="../report/tables.rst",
-               category="Cascade", subcategory="{patient}"),
-    params:
-        table="cascade_plan",
+        report(
+            "results/patients/{patient}/cascade_plan.html",
+            caption="../report/tables.rst",
+            category="Cascade",
+            subcategory="{patient}",
+        ),
     log:
         "logs/report/cascade_plan_table_{patient}.log",
     benchmark:
         "results/benchmarks/rules/cascade_plan_table_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        table="cascade_plan",
     script:
         "../workflow/scripts/report_table.py"

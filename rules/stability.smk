@@ -10,16 +10,26 @@ rule stability_rays:
         code=code_files("scripts.stability_rays"),
     output:
         "results/stability/rays_2d.nc",
-    params:
-        rays=config["stability"]["rays"],
-        # only the parts of the unit model the rays use (not its sweep or check settings)
-        actuator={k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "mesh", "contact", "solver")},
-        config_slice={"stability": {"rays": config["stability"]["rays"]},
-                      "actuator": {k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "mesh", "contact", "solver")}},
     log:
         "logs/stability/stability_rays.log",
     benchmark:
         "results/benchmarks/rules/stability_rays.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        rays=config["stability"]["rays"],
+        # only the parts of the unit model the rays use (not its sweep or check settings)
+        actuator={
+            k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "mesh", "contact", "solver")
+        },
+        config_slice={
+            "stability": {"rays": config["stability"]["rays"]},
+            "actuator": {
+                k: v
+                for k, v in config["actuator"].items()
+                if k in ("geometry", "material", "mesh", "contact", "solver")
+            },
+        },
     script:
         "../workflow/scripts/stability_rays.py"
 
@@ -29,15 +39,19 @@ rule stability_locking:
         code=code_files("scripts.stability_locking"),
     output:
         "results/stability/locking.nc",
-    params:
-        locking=config["stability"]["locking"],
-        actuator={k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")},
-        config_slice={"stability": {"locking": config["stability"]["locking"]},
-                      "actuator": {k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")}},
     log:
         "logs/stability/stability_locking.log",
     benchmark:
         "results/benchmarks/rules/stability_locking.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        locking=config["stability"]["locking"],
+        actuator={k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")},
+        config_slice={
+            "stability": {"locking": config["stability"]["locking"]},
+            "actuator": {k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")},
+        },
     script:
         "../workflow/scripts/stability_locking.py"
 
@@ -56,30 +70,49 @@ rule stability_maps:
         code=code_files("scripts.stability_maps"),
     output:
         nc="results/stability/stability.nc",
-        failures=report("results/stability/newton_failures.png", caption="../report/stability_failures.rst",
-                        category="Stability maps"),
-        locking=report("results/stability/locking.png", caption="../report/stability_locking.rst",
-                       category="Stability maps"),
-        penetration=report("results/stability/penetration.png", caption="../report/stability_penetration.rst",
-                           category="Stability maps"),
-        coverage=report("results/stability/surrogate_coverage.png", caption="../report/stability_coverage.rst",
-                        category="Stability maps"),
-        design=report("results/stability/design_feasibility.png", caption="../report/stability_design.rst",
-                      category="Stability maps"),
-        table=report("results/stability/summary.html", caption="../report/stability_summary.rst",
-                     category="Stability maps"),
+        failures=report(
+            "results/stability/newton_failures.png",
+            caption="../report/stability_failures.rst",
+            category="Stability maps",
+        ),
+        locking=report(
+            "results/stability/locking.png", caption="../report/stability_locking.rst", category="Stability maps"
+        ),
+        penetration=report(
+            "results/stability/penetration.png",
+            caption="../report/stability_penetration.rst",
+            category="Stability maps",
+        ),
+        coverage=report(
+            "results/stability/surrogate_coverage.png",
+            caption="../report/stability_coverage.rst",
+            category="Stability maps",
+        ),
+        design=report(
+            "results/stability/design_feasibility.png",
+            caption="../report/stability_design.rst",
+            category="Stability maps",
+        ),
+        table=report(
+            "results/stability/summary.html", caption="../report/stability_summary.rst", category="Stability maps"
+        ),
+    log:
+        "logs/stability/stability_maps.log",
+    benchmark:
+        "results/benchmarks/rules/stability_maps.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         patients=PATIENTS,
         # the sweeps' and unit check's element sizes and contact switch (labels of the maps)
         actuator={"mesh": config["actuator"]["mesh"], "contact": config["actuator"]["contact"]},
         stability=config["stability"],
         cascade_surrogate=config["cascade"]["surrogate"],
-        config_slice={"stability": config["stability"],
-                      "actuator": {"mesh": config["actuator"]["mesh"], "contact": config["actuator"]["contact"]},
-                      "cascade": {"surrogate": config["cascade"]["surrogate"]}, "patients": PATIENTS},
-    log:
-        "logs/stability/stability_maps.log",
-    benchmark:
-        "results/benchmarks/rules/stability_maps.tsv"
+        config_slice={
+            "stability": config["stability"],
+            "actuator": {"mesh": config["actuator"]["mesh"], "contact": config["actuator"]["contact"]},
+            "cascade": {"surrogate": config["cascade"]["surrogate"]},
+            "patients": PATIENTS,
+        },
     script:
         "../workflow/scripts/stability_maps.py"

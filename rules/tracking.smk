@@ -7,14 +7,16 @@ rule track_patient:
         code=code_files("scripts.track_patient"),
     output:
         "results/tracking/{patient}.json",
+    log:
+        "logs/tracking/{patient}.log",
+    benchmark:
+        "results/benchmarks/rules/track_patient_{patient}.tsv"
+    conda:
+        "../envs/project.yaml"
     params:
         uri=config["tracking"]["uri"],
         experiment=config["tracking"]["experiment"],
         config_slice=patient_cfg,
         patient=get_patient,
-    log:
-        "logs/tracking/{patient}.log",
-    benchmark:
-        "results/benchmarks/rules/track_patient_{patient}.tsv"
     script:
         "../workflow/scripts/track_patient.py"

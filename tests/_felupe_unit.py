@@ -27,10 +27,9 @@ from __future__ import annotations
 
 import time
 
+import felupe
 import numpy as np
 import scipy.sparse as sp
-
-import felupe
 
 try:  # PARDISO as in workflow.fem when it is there; SuperLU otherwise
     import pypardiso
@@ -289,8 +288,14 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
     """
     t0 = time.perf_counter()
     p, f_all, f_sil, f_pap, f_bnd = _fields(um)
-    umat = felupe.Hyperelastic(felupe.constitution.tensortrax.models.hyperelastic.third_order_deformation,
-                               C10=mat["c10"], C01=mat["c01"], C11=0.0, C20=mat["c20"], C30=0.0)
+    umat = felupe.Hyperelastic(
+        felupe.constitution.tensortrax.models.hyperelastic.third_order_deformation,
+        C10=mat["c10"],
+        C01=mat["c01"],
+        C11=0.0,
+        C20=mat["c20"],
+        C30=0.0,
+    )
     body = felupe.SolidBodyNearlyIncompressible(umat, f_sil, bulk=mat["bulk"])
     paper = felupe.SolidBody(felupe.NeoHookeCompressible(mu=mat["paper_mu"], lmbda=mat["paper_lambda"]), f_pap)
     load = felupe.SolidBodyPressure(f_bnd)

@@ -60,7 +60,7 @@ def local_overrides(workdir: Path) -> Path:
             pytest.skip(f"default backend reads the authors' export, absent here: {table}")
         over["musculoskeletal"] = {"table_path": str(table)}
     # the authors' finger section beside the repository: the copy reaches it by absolute path, so the
-    # smoke run checks its plan by FEA (issue 9) as the default run does
+    # smoke run checks its plan by FEA as the default run does
     section = (REPO / cfg["cascade"]["section_points"]).resolve()
     if section.is_file():
         over["cascade"] = {"section_points": str(section)}
@@ -77,7 +77,7 @@ def planned_jobs(proc: subprocess.CompletedProcess) -> dict[str, int]:
     jobs: dict[str, int] = {}
     lines = out.splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("Job stats"))
-    for line in lines[start + 3:]:
+    for line in lines[start + 3 :]:
         parts = line.split()
         if len(parts) != 2 or parts[0] == "total":
             break

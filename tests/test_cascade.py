@@ -4,21 +4,22 @@ The stand-in (test double only) is a unit that bends ``c (P_T - P_B)`` when
 free and is a linear torsional spring of stiffness ``k0 + k1 (P_T + P_B)``
 about that angle: swapping the pressures negates angle and moment, equal
 pressures give no bend, and the blocked moment is stiffness x free angle
-(about 8.7 deg and 0.2 N m at 300 kPa, the magnitudes of CLARIFICATIONS 10).
+(about 8.7 deg and 0.2 N m at 300 kPa, the magnitudes of the 3D unit at that pressure).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from _doubles import DENSITIES, mean_finger
 
-from workflow import cascade as C
-from workflow import finger as F
+from workflow.cascade import entry, kinematics, planning
+from workflow.cascade import finger as F
+from workflow.cascade import model as C
 
-from test_finger import DENSITIES, mean_finger
-
-ACTUATOR = dict(depth=6.8, gap=1, width=20, height=15, ch_depth=2.8, ch_width=14, ch_height=13,
-                bot_layer=2, paper_width=0.2)
+ACTUATOR = dict(
+    depth=6.8, gap=1, width=20, height=15, ch_depth=2.8, ch_width=14, ch_height=13, bot_layer=2, paper_width=0.2
+)
 LIMITS = (5.4, 4.1, 1.1)  # N m, the size of the mean finger's active moments
 
 
@@ -40,9 +41,11 @@ class LinearUnit:
 
 
 def springs():
-    return [F.JointSpring.from_points([90], [0.058]),
-            F.JointSpring.from_points([90, 100], [0.0189, 0.0285]),
-            F.JointSpring.from_points([80], [0.00324])]
+    return [
+        F.JointSpring.from_points([90], [0.058]),
+        F.JointSpring.from_points([90, 100], [0.0189, 0.0285]),
+        F.JointSpring.from_points([80], [0.00324]),
+    ]
 
 
 def model(unit=None, densities=DENSITIES, **kw):
@@ -63,14 +66,14 @@ def test_layout_counts_units_from_segment_lengths():
 def test_equal_pressures_give_a_straight_actuator():
     m = model()
     for p in (0.0, 120.0, 300.0):
-        th, nodes = C.free_shape(m, [p] * 8)
+        th, nodes = kinematics.free_shape(m, [p] * 8)
         np.testing.assert_allclose(th, 0.0, atol=1e-12)
         np.testing.assert_allclose(nodes[:, 1], nodes[0, 1], atol=1e-12)
         assert nodes[-1, 0] - nodes[0, 0] == pytest.approx(m.n_units * m.unit_length_m)
     # Top only bends it towards the palm (clockwise), bottom only the other way.
-    th, nodes = C.free_shape(m, [300, 0] * 4)
+    th, nodes = kinematics.free_shape(m, [300, 0] * 4)
     assert np.all(th > 8) and nodes[-1, 1] < nodes[0, 1]
-    th_b, _ = C.free_shape(m, [0, 300] * 4)
+    th_b, _ = kinematics.free_shape(m, [0, 300] * 4)
     np.testing.assert_allclose(th_b, -th)
 
 
@@ -89,13 +92,14 @@ def test_zero_pressure_gives_the_gravity_droop_of_the_springs():
     assert eq2.converged and np.all(eq2.joint_angles_deg > 0)
 
 
-@pytest.mark.parametrize("p", [[0] * 8, [286, 0, 286, 0, 0, 217, 187, 187], [290, 0] * 4,
-                               [0, 200] * 4, [150, 260, 150, 260, 215, 0, 215, 0]])
+@pytest.mark.parametrize(
+    "p", [[0] * 8, [286, 0, 286, 0, 0, 217, 187, 187], [290, 0] * 4, [0, 200] * 4, [150, 260, 150, 260, 215, 0, 215, 0]]
+)
 def test_moment_balance_residual_below_tolerance(p):
     m = model()
     eq = C.solve_equilibrium(m, p)
     assert eq.converged
-    r = C.moment_residuals(m, eq)
+    r = kinematics.moment_residuals(m, eq)
     assert np.max(np.abs(r["joint_nm"])) < 1e-9
     assert np.max(np.abs(r["span_deg"])) < 1e-6
     # Independent statics: each span carries the spring moment minus the weights'
@@ -131,7 +135,7 @@ def test_inverse_plan_reaches_a_reachable_target():
     m = model()
     p_known = np.array([220, 0, 220, 0, 150, 0, 0, 60], float)
     target = C.solve_equilibrium(m, p_known).joint_angles_deg
-    plan = C.plan_exercise(m, target, tol_deg=5.0, active_limits_nm=LIMITS)
+    plan = planning.plan_exercise(m, target, tol_deg=5.0, active_limits_nm=LIMITS)
     assert plan.achieved, plan.reason
     assert np.max(np.abs(plan.equilibrium.joint_angles_deg - target)) <= 5.0
     np.testing.assert_allclose(plan.pressures_kpa[0:2], plan.pressures_kpa[2:4])  # CMC tied to MCP
@@ -139,25 +143,26 @@ def test_inverse_plan_reaches_a_reachable_target():
     # Least squares: no more pressure than the pressures that made the target.
     assert plan.pressures_kpa @ plan.pressures_kpa <= p_known @ p_known + 1e-6
     # A tighter tolerance needs more pressure and still lands inside it.
-    tight = C.plan_exercise(m, target, tol_deg=1.0, active_limits_nm=LIMITS)
+    tight = planning.plan_exercise(m, target, tol_deg=1.0, active_limits_nm=LIMITS)
     assert tight.achieved and np.max(np.abs(tight.equilibrium.joint_angles_deg - target)) <= 1.0
     assert tight.pressures_kpa @ tight.pressures_kpa > plan.pressures_kpa @ plan.pressures_kpa
 
 
 def test_unreachable_target_is_marked_with_a_reason():
     m = model()
-    plan = C.plan_exercise(m, [90, 100, 80], tol_deg=5.0, active_limits_nm=LIMITS)
+    plan = planning.plan_exercise(m, [90, 100, 80], tol_deg=5.0, active_limits_nm=LIMITS)
     assert not plan.achieved
     assert "PIP" in plan.reason and "300 kPa limit" in plan.reason
     # A safety limit below what the plan needs is reported too.
-    plan2 = C.plan_exercise(m, [0, 0, 0], tol_deg=5.0, active_limits_nm=(1e-4, 1e-4, 1e-4))
+    plan2 = planning.plan_exercise(m, [0, 0, 0], tol_deg=5.0, active_limits_nm=(1e-4, 1e-4, 1e-4))
     assert not plan2.achieved and "safety limit" in plan2.reason
 
 
 def test_heavier_finger_needs_more_pressure():
-    light = C.plan_exercise(model(), [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS)
-    heavy = C.plan_exercise(model(densities={k: 2 * v for k, v in DENSITIES.items()}), [0, 0, 0],
-                            tol_deg=5.0, active_limits_nm=LIMITS)
+    light = planning.plan_exercise(model(), [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS)
+    heavy = planning.plan_exercise(
+        model(densities={k: 2 * v for k, v in DENSITIES.items()}), [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS
+    )
     assert light.achieved and heavy.achieved
     assert heavy.pressures_kpa @ heavy.pressures_kpa > 1.2 * (light.pressures_kpa @ light.pressures_kpa)
     # Holding the finger straight against gravity takes the bottom (extending) chambers.
@@ -194,13 +199,13 @@ def test_springs_from_loads_use_points_or_a_scaled_curve():
 def test_plan_dataset_roundtrip_and_validation(tmp_path):
     import xarray as xr
 
-    from workflow.provenance import write_dataset
-    from workflow.validation_cascade import compare_pressures, read_pressure_table
+    from workflow.cascade.validation import compare_pressures, read_pressure_table
+    from workflow.common.provenance import write_dataset
 
     m = model()
     targets = {"TGE1": [0, 0, 0], "TGE2": [90, 0, 0], "TGE4": [90, 100, 80]}
-    plans = C.plan_patient(m, targets, tol_deg=5.0, active_limits_nm=LIMITS)
-    ds = C.plans_dataset(m, plans, tol_deg=5.0, active_limits_nm=LIMITS)
+    plans = planning.plan_patient(m, targets, tol_deg=5.0, active_limits_nm=LIMITS)
+    ds = planning.plans_dataset(m, plans, tol_deg=5.0, active_limits_nm=LIMITS)
     path = write_dataset(ds, tmp_path / "plan.nc", rule="test", config_slice={}, title="t")
     back = xr.load_dataset(path)
     for v in ("pressure_kpa", "target_angle_deg", "predicted_angle_deg", "achieved", "reason"):
@@ -226,50 +231,83 @@ def test_plan_dataset_roundtrip_and_validation(tmp_path):
 def test_write_cascade_plan_from_stage_files(tmp_path, caplog):
     """The rule's entry point on minimal upstream files (contract layouts)."""
     import xarray as xr
-
-    from test_finger import MEASURES, SECTION
+    from _doubles import MEASURES, SECTION
 
     joints = ["MCP", "PIP", "DIP"]
     ex = ["TGE1", "TGE2"]
-    xr.Dataset({"depth": ("run", [0.0, 1.0])}, coords={"run": [9, 12], "marker": ("run", ["Original", "DM"])}) \
-        .to_netcdf(tmp_path / "ccd.nc")
+    xr.Dataset(
+        {"depth": ("run", [0.0, 1.0])}, coords={"run": [9, 12], "marker": ("run", ["Original", "DM"])}
+    ).to_netcdf(tmp_path / "ccd.nc")
     mom = np.full((2, 1, 3, 3, 2), np.nan)
     mom[0, 0, 0, 1, 0] = 0.05
-    xr.Dataset({"moment_nm": (("run", "finger", "joint", "angle_deg", "activation"), mom)},
-               coords={"run": [9, 12], "finger": ["F3"], "joint": joints, "angle_deg": [80.0, 90.0, 100.0],
-                       "activation": [0.01, 1.0]}).to_netcdf(tmp_path / "moments.nc")
     xr.Dataset(
-        {"x": ("dimension", [0.0, 0.0, 0.0]),
-         "target_angle_deg": (("exercise", "joint"), [[0, 0, 0], [90, 0, 0]]),
-         "passive_moment_nm": (("exercise", "joint"), [[0, 0, 0], [0.05, 0, 0]]),
-         "active_limit_nm": ("joint", list(LIMITS))},
+        {"moment_nm": (("run", "finger", "joint", "angle_deg", "activation"), mom)},
+        coords={
+            "run": [9, 12],
+            "finger": ["F3"],
+            "joint": joints,
+            "angle_deg": [80.0, 90.0, 100.0],
+            "activation": [0.01, 1.0],
+        },
+    ).to_netcdf(tmp_path / "moments.nc")
+    xr.Dataset(
+        {
+            "x": ("dimension", [0.0, 0.0, 0.0]),
+            "target_angle_deg": (("exercise", "joint"), [[0, 0, 0], [90, 0, 0]]),
+            "passive_moment_nm": (("exercise", "joint"), [[0, 0, 0], [0.05, 0, 0]]),
+            "active_limit_nm": ("joint", list(LIMITS)),
+        },
         coords={"exercise": ex, "joint": joints, "dimension": ["depth", "length", "breadth"]},
     ).to_netcdf(tmp_path / "loads.nc")
     # PIP and DIP have no sample above 0 deg in these loads: the entry point must say so.
-    cfg = {"tolerance_deg": 5.0, "margin_deg": 0.25, "tie_cmc_mcp": True, "p_max_kpa": 300.0,
-           "strap_stiffness_n_per_m": 240e3, "gravity_m_s2": 9.81,
-           "densities": {**DENSITIES, "silicone": 1240.0, "paper": 800.0},
-           "section_points": str(SECTION), "cmc_length_fraction": 0.5, "tip_units": 1, "units_per_group": {},
-           "unit_geometry_mm": ACTUATOR}
+    cfg = {
+        "tolerance_deg": 5.0,
+        "margin_deg": 0.25,
+        "tie_cmc_mcp": True,
+        "p_max_kpa": 300.0,
+        "strap_stiffness_n_per_m": 240e3,
+        "gravity_m_s2": 9.81,
+        "densities": {**DENSITIES, "silicone": 1240.0, "paper": 800.0},
+        "section_points": str(SECTION),
+        "cmc_length_fraction": 0.5,
+        "tip_units": 1,
+        "units_per_group": {},
+        "unit_geometry_mm": ACTUATOR,
+    }
     anth = {"coded_unit_sd": 1.0, "measures": {k: {"mean": m, "sd": s} for k, (m, s) in MEASURES.items()}}
-    kw = dict(ccd_nc=tmp_path / "ccd.nc", moments_nc=tmp_path / "moments.nc", joint_loads_nc=tmp_path / "loads.nc",
-              cascade_cfg=cfg, anthropometry=anth, config_slice={"c": 1})
+    kw = dict(
+        ccd_nc=tmp_path / "ccd.nc",
+        moments_nc=tmp_path / "moments.nc",
+        joint_loads_nc=tmp_path / "loads.nc",
+        cascade_cfg=cfg,
+        anthropometry=anth,
+        config_slice={"c": 1},
+    )
     with pytest.raises(ValueError, match="PIP"):
-        C.write_cascade_plan("p", {"finger": "F3"}, LinearUnit(), out_nc=tmp_path / "x.nc", out_png=None, **kw)
+        entry.write_cascade_plan("p", {"finger": "F3"}, LinearUnit(), out_nc=tmp_path / "x.nc", out_png=None, **kw)
     xr.Dataset(
-        {"x": ("dimension", [0.0, 0.0, 0.0]),
-         "target_angle_deg": (("exercise", "joint"), [[0, 0, 0], [90, 100, 80]]),
-         "passive_moment_nm": (("exercise", "joint"), [[0, 0, 0], [0.05, 0.0285, 0.0032]]),
-         "active_limit_nm": ("joint", list(LIMITS))},
+        {
+            "x": ("dimension", [0.0, 0.0, 0.0]),
+            "target_angle_deg": (("exercise", "joint"), [[0, 0, 0], [90, 100, 80]]),
+            "passive_moment_nm": (("exercise", "joint"), [[0, 0, 0], [0.05, 0.0285, 0.0032]]),
+            "active_limit_nm": ("joint", list(LIMITS)),
+        },
         coords={"exercise": ex, "joint": joints, "dimension": ["depth", "length", "breadth"]},
     ).to_netcdf(tmp_path / "loads.nc")
-    # a surrogate sampled only up to 100 kPa: planned pairs beyond it are flagged and logged (issue 7 item 2)
-    from workflow.stability import SampledRegion
+    # a surrogate sampled only up to 100 kPa: planned pairs beyond it are flagged and logged
+    from workflow.actuator.sampled_region import SampledRegion
 
     region = SampledRegion(np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0], [100.0, 100.0]]), np.empty((0, 2)))
     with caplog.at_level("WARNING", logger="workflow.cascade"):
-        ds = C.write_cascade_plan("p", {"finger": "F3"}, LinearUnit(), out_nc=tmp_path / "plan.nc",
-                                  out_png=tmp_path / "poses.png", sampled_region=region, **kw)
+        ds = entry.write_cascade_plan(
+            "p",
+            {"finger": "F3"},
+            LinearUnit(),
+            out_nc=tmp_path / "plan.nc",
+            out_png=tmp_path / "poses.png",
+            sampled_region=region,
+            **kw,
+        )
     back = xr.load_dataset(tmp_path / "plan.nc")
     assert back.attrs["rule"] == "cascade_plan" and "config_sha256" in back.attrs
     assert (tmp_path / "poses.png").stat().st_size > 10_000
@@ -280,15 +318,18 @@ def test_write_cascade_plan_from_stage_files(tmp_path, caplog):
     assert outside.any() and np.array_equal(~back["pressure_in_sampled_region"].values, outside)
     assert sum("outside the sampled region" in r.getMessage() for r in caplog.records) == int(outside.sum())
     # the silicone's limit and the surrogate's sampled range bound every planned pressure, and the plan says which
-    from workflow.pressure_limit import PressureLimit
+    from workflow.actuator.pressure_limit import PressureLimit
 
     assert float(p.max()) == pytest.approx(300.0)  # TGE2 is out of reach: its spans sit at cascade.p_max_kpa
     sampled = LinearUnit()
     sampled.p_max_kpa = 200.0
-    for unit, material, bound, source in ((LinearUnit(), PressureLimit(150.0, "material"), 150.0, "material"),
-                                          (sampled, PressureLimit(300.0, "material"), 200.0, "sampled")):
-        ds = C.write_cascade_plan("p", {"finger": "F3"}, unit, out_nc=tmp_path / "lim.nc", out_png=None,
-                                  material_limit=material, **kw)
+    for unit, material, bound, source in (
+        (LinearUnit(), PressureLimit(150.0, "material"), 150.0, "material"),
+        (sampled, PressureLimit(300.0, "material"), 200.0, "sampled"),
+    ):
+        ds = entry.write_cascade_plan(
+            "p", {"finger": "F3"}, unit, out_nc=tmp_path / "lim.nc", out_png=None, material_limit=material, **kw
+        )
         assert float(ds["pressure_kpa"].max()) == pytest.approx(bound)
         assert ds.attrs["p_limit_kpa"] == bound and source in ds.attrs["p_limit_source"]
 
@@ -296,8 +337,8 @@ def test_write_cascade_plan_from_stage_files(tmp_path, caplog):
 def test_untying_cmc_from_mcp_never_needs_more_pressure():
     m = model()
     target = C.solve_equilibrium(m, [250, 0, 150, 0, 80, 0, 0, 40]).joint_angles_deg
-    tied = C.plan_exercise(m, target, tol_deg=3.0, active_limits_nm=LIMITS)
-    free = C.plan_exercise(m, target, tol_deg=3.0, active_limits_nm=LIMITS, tie_cmc_mcp=False)
+    tied = planning.plan_exercise(m, target, tol_deg=3.0, active_limits_nm=LIMITS)
+    free = planning.plan_exercise(m, target, tol_deg=3.0, active_limits_nm=LIMITS, tie_cmc_mcp=False)
     assert tied.achieved and free.achieved, (tied.reason, free.reason)
     assert np.max(np.abs(free.equilibrium.joint_angles_deg - target)) <= 3.0
     # The untied grid is coarser, so allow its resolution (a few kPa) in the comparison.
@@ -305,24 +346,29 @@ def test_untying_cmc_from_mcp_never_needs_more_pressure():
 
 
 def test_dummy_finger_is_solid_pla_with_the_same_springs(config):
-    """CLARIFICATIONS 17: the dummy finger changes the masses (PLA), not the springs."""
+    """The dummy finger (the paper's PLA finger, section 4) changes the masses, not the springs."""
     import xarray as xr
 
-    from workflow.cascade import patient_finger
+    from workflow.cascade.patient import patient_finger
 
     ex, joints = ["TGE1", "TGE4"], ["MCP", "PIP", "DIP"]
     loads = xr.Dataset(
-        {"x": (("dimension",), np.zeros(3)),
-         "target_angle_deg": (("exercise", "joint"), [[0.0, 0.0, 0.0], [90.0, 100.0, 80.0]]),
-         "passive_moment_nm": (("exercise", "joint"), [[0.0, 0.0, 0.0], [0.05, 0.025, 0.02]])},
-        coords={"dimension": ["depth", "length", "breadth"], "exercise": ex, "joint": joints})
+        {
+            "x": (("dimension",), np.zeros(3)),
+            "target_angle_deg": (("exercise", "joint"), [[0.0, 0.0, 0.0], [90.0, 100.0, 80.0]]),
+            "passive_moment_nm": (("exercise", "joint"), [[0.0, 0.0, 0.0], [0.05, 0.025, 0.02]]),
+        },
+        coords={"dimension": ["depth", "length", "breadth"], "exercise": ex, "joint": joints},
+    )
     moments = xr.Dataset(coords={"finger": ["F2"]})  # no curve for F3: the patient's points alone
     ccd = xr.Dataset({"marker": (("run",), ["Original"])}, coords={"run": [9]})
     c = dict(config["cascade"], section_points=None)
-    human, _ = patient_finger({"finger": "F3"}, loads, moments, ccd, cascade_cfg=c,
-                              anthropometry=config["anthropometry"])
-    dummy, note = patient_finger({"finger": "F3", "model": "dummy"}, loads, moments, ccd, cascade_cfg=c,
-                                 anthropometry=config["anthropometry"])
+    human, _ = patient_finger(
+        {"finger": "F3"}, loads, moments, ccd, cascade_cfg=c, anthropometry=config["anthropometry"]
+    )
+    dummy, note = patient_finger(
+        {"finger": "F3", "model": "dummy"}, loads, moments, ccd, cascade_cfg=c, anthropometry=config["anthropometry"]
+    )
     assert "PLA" in note
     d = c["densities"]
     # every slice of the proximal segment is flesh+bone (4000/2000) in the human, PLA in the dummy

@@ -25,31 +25,38 @@ def test_default_config_is_valid(cfg):
     _validate(cfg)
 
 
-@pytest.mark.parametrize("mutate,needle", [
-    (lambda c: c.update(desing={}), "desing"),
-    (lambda c: c["rsm"].update(alpah=0.1), "alpah"),
-    (lambda c: c["rsm"].update(alpha=1.5), "1.5"),
-    (lambda c: c["musculoskeletal"].update(backend="matlab"), "matlab"),
-    (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": -52.0}}), "-52.0"),
-    (lambda c: c["patients"].update(p9={"measurements_mm": {"L3XX": 52.0}}), "L3XX"),
-    (lambda c: c["patients"].update(p9={"coded": {"depth": 0, "length": 0}}), "breadth"),
-    (lambda c: c["exercises"].update(TGE6={"mcp": 120, "pip": 0, "dip": 0}), "120"),
-    (lambda c: c["patients"]["mean"].update(model="robot"), "robot"),
-    (lambda c: c["cascade"].update(dummy_patient="nobody"), "nobody"),
-    (lambda c: c["cascade"].update(dummy_patient="mean"), "model: dummy"),
-    (lambda c: c["cascade"].update(validation_patient="nobody"), "validation_patient"),
-    (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": 0.0}}), "'measurements_mm'"),
-    (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": float("nan")}}), "L3PP = nan"),
-    (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": "52"}}), "'52' is not of type 'number'"),
-    (lambda c: c["patients"].update(p9={"finger": "F6", "coded": {"depth": 0, "length": 0, "breadth": 0}}), "'F6'"),
-    (lambda c: c["patients"].update(p9={"coded": {"depth": 0, "length": 0, "breadth": 0},
-                                        "measurements_mm": {"L3PP": 50.0}}), "is valid under each of"),
-    (lambda c: c["actuator"]["unit_check"].update(p_top_kpa=[-60.0]), "-60.0"),
-    (lambda c: c["actuator"]["mesh"].update(h_2d_mm=0.0), "'h_2d_mm'"),
-    (lambda c: c["surrogates"].update(folds=1), "'folds'"),
-    (lambda c: c["surrogates"].update(k=0), "['k']"),
-    (lambda c: c["patients"].update({"p/1": {"coded": {"depth": 0, "length": 0, "breadth": 0}}}), "'p/1'"),
-])
+@pytest.mark.parametrize(
+    "mutate,needle",
+    [
+        (lambda c: c.update(desing={}), "desing"),
+        (lambda c: c["rsm"].update(alpah=0.1), "alpah"),
+        (lambda c: c["rsm"].update(alpha=1.5), "1.5"),
+        (lambda c: c["musculoskeletal"].update(backend="matlab"), "matlab"),
+        (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": -52.0}}), "-52.0"),
+        (lambda c: c["patients"].update(p9={"measurements_mm": {"L3XX": 52.0}}), "L3XX"),
+        (lambda c: c["patients"].update(p9={"coded": {"depth": 0, "length": 0}}), "breadth"),
+        (lambda c: c["exercises"].update(TGE6={"mcp": 120, "pip": 0, "dip": 0}), "120"),
+        (lambda c: c["patients"]["mean"].update(model="robot"), "robot"),
+        (lambda c: c["cascade"].update(dummy_patient="nobody"), "nobody"),
+        (lambda c: c["cascade"].update(dummy_patient="mean"), "model: dummy"),
+        (lambda c: c["cascade"].update(validation_patient="nobody"), "validation_patient"),
+        (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": 0.0}}), "'measurements_mm'"),
+        (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": float("nan")}}), "L3PP = nan"),
+        (lambda c: c["patients"].update(p9={"measurements_mm": {"L3PP": "52"}}), "'52' is not of type 'number'"),
+        (lambda c: c["patients"].update(p9={"finger": "F6", "coded": {"depth": 0, "length": 0, "breadth": 0}}), "'F6'"),
+        (
+            lambda c: c["patients"].update(
+                p9={"coded": {"depth": 0, "length": 0, "breadth": 0}, "measurements_mm": {"L3PP": 50.0}}
+            ),
+            "is valid under each of",
+        ),
+        (lambda c: c["actuator"]["unit_check"].update(p_top_kpa=[-60.0]), "-60.0"),
+        (lambda c: c["actuator"]["mesh"].update(h_2d_mm=0.0), "'h_2d_mm'"),
+        (lambda c: c["surrogates"].update(folds=1), "'folds'"),
+        (lambda c: c["surrogates"].update(k=0), "['k']"),
+        (lambda c: c["patients"].update({"p/1": {"coded": {"depth": 0, "length": 0, "breadth": 0}}}), "'p/1'"),
+    ],
+)
 def test_bad_values_are_named(cfg, mutate, needle):
     mutate(cfg)
     with pytest.raises(Exception) as err:
@@ -64,25 +71,39 @@ def test_missing_table_is_named(cfg):
 
 
 # --- Safety checks at parse time: pressures, measurement codes, coded levels, the silicone's law ------------
-@pytest.mark.parametrize("mutate,needles", [
-    # more pressure than the silicone bears (Fig. 11: 300 kPa the largest considered)
-    (lambda c: c["cascade"].update(p_max_kpa=3000.0), ["cascade.p_max_kpa = 3000", "actuator.material.p_limit_kpa = 300"]),
-    (lambda c: c["sweep"]["3d"].update(p_max_kpa=400.0), ["sweep.3d.p_max_kpa = 400", "p_limit_kpa = 300"]),
-    (lambda c: c["stability"]["rays"].update(p_max_kpa=350.0), ["stability.rays.p_max_kpa = 350", "300"]),
-    # more pressure than the plans' surrogate was sampled on
-    (lambda c: c["sweep"]["3d"].update(p_max_kpa=200.0), ["cascade.p_max_kpa = 300", "sweep.3d.p_max_kpa = 200"]),
-    # a middle-finger code on the index finger
-    (lambda c: c["patients"].update(p1={"finger": "F2", "measurements_mm": {"L3PP": 50.0}}), ["L3PP", "F2"]),
-    (lambda c: c["patients"].update(p1={"finger": "F3", "measurements_mm": {"L2PP": 50.0}}), ["L2PP", "F3"]),
-    # implausible coded levels: given, or from a measurement in the wrong unit (cm)
-    (lambda c: c["patients"].update(p1={"coded": {"depth": 5.0, "length": 0.0, "breadth": 0.0}}), ["depth 5", "coded_bound"]),
-    (lambda c: c["patients"].update(p1={"measurements_mm": {"L3PP": 5.06}}), ["length -12", "coded_bound"]),
-    # the Mooney-Rivlin law unstable at rest, or within the stretches an FE model meets
-    # (with Table 5's c01 and c20; the config's present c01 = 0.2975 keeps mu0 > 0 and the law stable)
-    (lambda c: c["actuator"]["material"].update(c10_mpa=-0.26, c01_mpa=0.09754981, c20_mpa=0.05750069),
-     ["c10_mpa = -0.26", "mu0", "<= 0"]),
-    (lambda c: c["actuator"]["material"].update(c10_mpa=0.26, c01_mpa=0.1, c20_mpa=-0.01), ["Drucker", "equibiaxial"]),
-])
+@pytest.mark.parametrize(
+    "mutate,needles",
+    [
+        # more pressure than the silicone bears (Fig. 11: 300 kPa the largest considered)
+        (
+            lambda c: c["cascade"].update(p_max_kpa=3000.0),
+            ["cascade.p_max_kpa = 3000", "actuator.material.p_limit_kpa = 300"],
+        ),
+        (lambda c: c["sweep"]["3d"].update(p_max_kpa=400.0), ["sweep.3d.p_max_kpa = 400", "p_limit_kpa = 300"]),
+        (lambda c: c["stability"]["rays"].update(p_max_kpa=350.0), ["stability.rays.p_max_kpa = 350", "300"]),
+        # more pressure than the plans' surrogate was sampled on
+        (lambda c: c["sweep"]["3d"].update(p_max_kpa=200.0), ["cascade.p_max_kpa = 300", "sweep.3d.p_max_kpa = 200"]),
+        # a middle-finger code on the index finger
+        (lambda c: c["patients"].update(p1={"finger": "F2", "measurements_mm": {"L3PP": 50.0}}), ["L3PP", "F2"]),
+        (lambda c: c["patients"].update(p1={"finger": "F3", "measurements_mm": {"L2PP": 50.0}}), ["L2PP", "F3"]),
+        # implausible coded levels: given, or from a measurement in the wrong unit (cm)
+        (
+            lambda c: c["patients"].update(p1={"coded": {"depth": 5.0, "length": 0.0, "breadth": 0.0}}),
+            ["depth 5", "coded_bound"],
+        ),
+        (lambda c: c["patients"].update(p1={"measurements_mm": {"L3PP": 5.06}}), ["length -12", "coded_bound"]),
+        # the Mooney-Rivlin law unstable at rest, or within the stretches an FE model meets
+        # (with Table 5's c01 and c20; the config's present c01 = 0.2975 keeps mu0 > 0 and the law stable)
+        (
+            lambda c: c["actuator"]["material"].update(c10_mpa=-0.26, c01_mpa=0.09754981, c20_mpa=0.05750069),
+            ["c10_mpa = -0.26", "mu0", "<= 0"],
+        ),
+        (
+            lambda c: c["actuator"]["material"].update(c10_mpa=0.26, c01_mpa=0.1, c20_mpa=-0.01),
+            ["Drucker", "equibiaxial"],
+        ),
+    ],
+)
 def test_unsafe_values_stop_before_any_job(cfg, mutate, needles):
     mutate(cfg)
     with pytest.raises(settings.ConfigError) as err:

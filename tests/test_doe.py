@@ -2,7 +2,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from workflow import doe
+from workflow.doe import ccd as doe
 
 TABLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "resources" / "table03_04_ccd_scaling.csv"
 
@@ -12,7 +12,9 @@ def test_ccd_has_the_papers_15_runs_markers_and_levels():
     t = pd.read_csv(TABLE)
     assert len(d) == 15
     assert list(d["marker"]) == list(t["marker"])
-    np.testing.assert_allclose(d[["depth", "length", "breadth"]].to_numpy(), t[["depth", "length", "breadth"]].to_numpy())
+    np.testing.assert_allclose(
+        d[["depth", "length", "breadth"]].to_numpy(), t[["depth", "length", "breadth"]].to_numpy()
+    )
     # axial points at radius 1, corners at sqrt(3)/sqrt(2)
     r = np.linalg.norm(d[["depth", "length", "breadth"]].to_numpy(), axis=1)
     n_nonzero = (d[["depth", "length", "breadth"]].abs() > 0).sum(axis=1).to_numpy()
@@ -20,12 +22,15 @@ def test_ccd_has_the_papers_15_runs_markers_and_levels():
     np.testing.assert_allclose(r[n_nonzero == 3], np.sqrt(1.5), atol=1e-4)
 
 
-@pytest.mark.parametrize("levels,name", [
-    ({"depth": 0.7, "length": -0.7, "breadth": 0.7}, "D+L-B+"),
-    ({"depth": 0, "length": 1, "breadth": 0}, "LM"),
-    ({"depth": -1, "length": 0, "breadth": 0}, "Dm"),
-    ({"depth": 0, "length": 0, "breadth": 0}, "Original"),
-])
+@pytest.mark.parametrize(
+    "levels,name",
+    [
+        ({"depth": 0.7, "length": -0.7, "breadth": 0.7}, "D+L-B+"),
+        ({"depth": 0, "length": 1, "breadth": 0}, "LM"),
+        ({"depth": -1, "length": 0, "breadth": 0}, "Dm"),
+        ({"depth": 0, "length": 0, "breadth": 0}, "Original"),
+    ],
+)
 def test_marker_names(levels, name):
     assert doe.marker_name(levels) == name
 

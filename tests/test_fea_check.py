@@ -1,4 +1,4 @@
-"""FEA check parts that can fail silently (issue 9): hinge springs, finger droop, straight
+"""FEA check parts that can fail silently: hinge springs, finger droop, straight
 actuator at zero and at equal pressures, the actuator mesh's group sets, pressure mapping flags.
 
 Coarse meshes only; the whole coupled check runs in the smoke workflow and the benchmark.
@@ -8,17 +8,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _doubles import DENSITIES, SECTION, mean_finger, measures
 
 from workflow import fem
-from workflow import finger as F
-from workflow.fea_check import pressures_2d
-from workflow.fea_model import finger_profiles, lame, spring_callables
-from workflow.fem._actuator import solve_standalone
-from workflow.fem._coupled import nodal_body_force, cell_areas
-from workflow.fem._finger2d import BONE, FLESH, DeadLoad, HingeSpring, StrapSpring, build_finger_mesh
+from workflow.cascade import finger as F
+from workflow.cascade import planning
+from workflow.fea_check import correction
+from workflow.fea_check.check import pressures_2d
+from workflow.fea_check.model import finger_profiles, lame, spring_callables
 from workflow.fem._mesh import build_actuator_mesh
-
-from test_finger import DENSITIES, SECTION, mean_finger, measures
+from workflow.fem.actuator import solve_standalone
+from workflow.fem.coupled import cell_areas, nodal_body_force
+from workflow.fem.finger2d import BONE, FLESH, DeadLoad, HingeSpring, StrapSpring, build_finger_mesh
 
 SOLVER = {"initial_step": 0.1, "max_iter": 30, "grow_below_iter": 10, "max_steps": 80, "atol": 1e-8}
 
@@ -33,8 +34,10 @@ def test_actuator_mesh_is_the_unit_chain_with_group_sets():
     n_cmc, n_mcp = len(big.facets["cavity_top_CMC"]), len(big.facets["cavity_top_MCP"])
     assert n_cmc * 3 == n_mcp * 2 and n_cmc + n_mcp == len(big.facets["cavity_top"])
     # self-contact of every gap and every pocket, both sides
-    assert sorted(big.contact_surfaces) == sorted([f"gap_{s}{k}" for s in ("top", "bottom") for k in range(4)]
-                                                  + [f"pocket_{s}{k}" for s in ("top", "bottom") for k in range(5)])
+    assert sorted(big.contact_surfaces) == sorted(
+        [f"gap_{s}{k}" for s in ("top", "bottom") for k in range(4)]
+        + [f"pocket_{s}{k}" for s in ("top", "bottom") for k in range(5)]
+    )
 
 
 def _pivot_points(theta):
@@ -85,8 +88,15 @@ def _finger_only(h=3.0, stiff=(0.15, 0.06, 0.02)):
     import skfem
 
     m = skfem.MeshQuad(fm.p, fm.t)
-    mat = {"c10": 0, "c01": 0, "c20": 0, "bulk": 0, "paper_mu": 0, "paper_lambda": 0,
-           "neo_hooke": {FLESH: lame(0.024, 0.4), BONE: lame(20000.0, 0.3)}}
+    mat = {
+        "c10": 0,
+        "c01": 0,
+        "c20": 0,
+        "bulk": 0,
+        "paper_mu": 0,
+        "paper_lambda": 0,
+        "neo_hooke": {FLESH: lame(0.024, 0.4), BONE: lame(20000.0, 0.3)},
+    }
     solid = fem.SolidAssembler(m, fm.material, mat)
     n = 2 * fm.p.shape[1]
     W = 20.0
@@ -97,14 +107,15 @@ def _finger_only(h=3.0, stiff=(0.15, 0.06, 0.02)):
         sel = fm.segment == k
         rho = np.where(fm.material[sel] == BONE, DENSITIES["bone"], flesh[k])
         b[sel] = -rho * finger.segments[k].mass_kg * 9.81 / W / float(np.sum(rho * area[sel]))
-    hinges = [HingeSpring(n, fm.p, None if j == 0 else fm.chords[j - 1], fm.chords[j], *spring_callables(s, W))
-              for j, s in enumerate(springs)]
+    hinges = [
+        HingeSpring(n, fm.p, None if j == 0 else fm.chords[j - 1], fm.chords[j], *spring_callables(s, W))
+        for j, s in enumerate(springs)
+    ]
     mcp = fm.nodes["joint_MCP"]
     model = fem.Model(solid, fixed=[2 * mcp, 2 * mcp + 1], extras=hinges + [DeadLoad(nodal_body_force(m, b))])
     return finger, fm, model, hinges
 
 
-@pytest.mark.skipif(not SECTION.exists(), reason="section points not available")
 def test_finger_alone_droops_by_the_angle_its_springs_predict():
     finger, fm, model, hinges = _finger_only()
     res = fem.solve_path(model, fm.p, SOLVER)
@@ -150,7 +161,7 @@ def test_pressure_mapping_flags():
 
 
 def test_applied_pressures_stay_under_the_silicone_limit():
-    from workflow.fea_check import applied_limit
+    from workflow.fea_check.check import applied_limit
 
     lim = applied_limit({"material": {"p_limit_kpa": 250.0, "p_limit_source": "test"}}, 300.0)
     assert lim.kpa == 250.0 and lim.source == "actuator.material.p_limit_kpa: test"
@@ -171,24 +182,29 @@ def test_applied_pressures_stay_under_the_silicone_limit():
     assert list(flag[0]) == [2, 4, 0]  # 600 kPa needed: capped at 250; equal pair cut back; 200 kPa mapped
 
 
-@pytest.mark.skipif(not SECTION.exists(), reason="section points not available")
 def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     """Coupled model at a coarse mesh, gravity only: the finger hangs from the straps,
     the strap points stay on the actuator (gap = force / k) and no contact penetrates
     beyond the bound of config fea_check.penetration_bound_mm (0.1 mm)."""
-    import yaml
     from pathlib import Path
 
-    from workflow.fea_model import DEFAULT_FEA_CHECK, build_patient_fea
-    from workflow.fem._coupled import solve_coupled
+    import yaml
+
+    from workflow.fea_check.model import DEFAULT_FEA_CHECK, build_patient_fea
+    from workflow.fem.coupled import solve_coupled
 
     cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "config.yaml").read_text())
     springs = [F.JointSpring.linear(k / 90.0) for k in (0.15, 0.06, 0.02)]
     finger = mean_finger(springs=springs, densities=DENSITIES)
     casc = dict(cfg["cascade"], section_points=str(SECTION))
-    fea = build_patient_fea(finger, {"CMC": 2, "MCP": 6, "PIP": 4, "DIP": 4}, actuator_cfg=cfg["actuator"],
-                            cascade_cfg=casc, reference_dims_mm={k: v["mean"] for k, v in measures().items()},
-                            fea_cfg={"h_actuator_mm": 3.0, "h_finger_mm": 3.0})
+    fea = build_patient_fea(
+        finger,
+        {"CMC": 2, "MCP": 6, "PIP": 4, "DIP": 4},
+        actuator_cfg=cfg["actuator"],
+        cascade_cfg=casc,
+        reference_dims_mm={k: v["mean"] for k, v in measures().items()},
+        fea_cfg={"h_actuator_mm": 3.0, "h_finger_mm": 3.0},
+    )
     res = solve_coupled(fea.setup, {}, solver=dict(SOLVER, atol=1e-6, max_steps=150))
     assert res.status == 0 and res.phase == "pressure" and res.load_factor == 1.0
     assert res.max_penetration_mm <= DEFAULT_FEA_CHECK["penetration_bound_mm"]
@@ -201,7 +217,7 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
 
 
 def test_rigid_rotation_update_is_exact_for_rotations_and_first_order_otherwise():
-    from workflow.fem._finger2d import RigidRotationUpdate
+    from workflow.fem.finger2d import RigidRotationUpdate
 
     rng = np.random.default_rng(0)
     p_ref = rng.uniform(-5, 5, (2, 12))
@@ -240,14 +256,22 @@ def _fake_fea(monkeypatch, truth):
     """Replace the 2D FEA by another reduced-order chain (``truth``): the correction step only sees angles."""
     from types import SimpleNamespace
 
-    from workflow import cascade as C
-    from workflow import fea_check as FC
+    from workflow.cascade import model as C
+    from workflow.fea_check import check as FC
 
     def fake_check(fea, name, p, solver, gravity=None):
         eq = C.solve_equilibrium(truth, np.asarray(p, float).ravel())
         res = SimpleNamespace(status=0, load_factor=1.0, phase="pressure", reason="")
-        return FC.ExerciseCheck(name, np.asarray(p, float), res, eq.joint_angles_deg, eq.actuator_moments_nm,
-                                eq.actuator_moments_nm, np.zeros(2), 0.0)
+        return FC.ExerciseCheck(
+            name,
+            np.asarray(p, float),
+            res,
+            eq.joint_angles_deg,
+            eq.actuator_moments_nm,
+            eq.actuator_moments_nm,
+            np.zeros(2),
+            0.0,
+        )
 
     monkeypatch.setattr(FC, "check_exercise", fake_check)
     return fake_check
@@ -255,21 +279,35 @@ def _fake_fea(monkeypatch, truth):
 
 def test_correction_step_replans_with_the_fea_angles_until_the_target_is_reached(monkeypatch):
     from test_cascade import LIMITS, LinearUnit, model
-    from workflow import cascade as C
-    from workflow import fea_check as FC
+
+    from workflow.cascade import model as C
+    from workflow.fea_check import check as FC
 
     ro = model(LinearUnit())  # what the plan believes
     truth = model(LinearUnit(c=0.02))  # what the "FEA" does: the same chain with weaker units
     check = _fake_fea(monkeypatch, truth)
     target = np.array([45.0, 30.0, 15.0])
     opts = {"tol_deg": 5.0, "p_max_kpa": 300.0, "tie_cmc_mcp": True, "margin_deg": 0.25, "active_limits_nm": LIMITS}
-    plan = C.plan_exercise(ro, target, **opts)
+    plan = planning.plan_exercise(ro, target, **opts)
     assert plan.achieved
     first = check(None, "X", C.pressures_table(plan.pressures_kpa), {})
     assert np.max(np.abs(first.angle_deg - target)) > 5.0  # the plan misses in the "FEA"
-    cor = FC.correct_exercise(None, ro, "X", target, C.pressures_table(plan.pressures_kpa),
-                              plan.equilibrium.joint_angles_deg, first, to_2d=lambda p: p, solver={}, gravity=None,
-                              tolerance_deg=5.0, limits_nm=np.array(LIMITS), plan_opts=opts, max_iterations=4)
+    cor = correction.correct_exercise(
+        None,
+        ro,
+        "X",
+        target,
+        C.pressures_table(plan.pressures_kpa),
+        plan.equilibrium.joint_angles_deg,
+        first,
+        to_2d=lambda p: p,
+        solver={},
+        gravity=None,
+        tolerance_deg=5.0,
+        limits_nm=np.array(LIMITS),
+        plan_opts=opts,
+        max_iterations=4,
+    )
     best = cor.checks[cor.best]
     assert FC.outcome(best, target, 5.0, np.array(LIMITS))[0], cor.stop_reason
     assert 1 <= cor.iterations <= 4 and cor.stop_reason.startswith("reached after")
@@ -278,19 +316,33 @@ def test_correction_step_replans_with_the_fea_angles_until_the_target_is_reached
 
 def test_correction_step_stops_when_the_pressures_are_at_their_limit(monkeypatch):
     from test_cascade import LIMITS, LinearUnit, model
-    from workflow import cascade as C
-    from workflow import fea_check as FC
+
+    from workflow.cascade import model as C
+    from workflow.fea_check import check as FC
 
     ro, truth = model(LinearUnit()), model(LinearUnit(c=0.005))
     check = _fake_fea(monkeypatch, truth)
     target = np.array([90.0, 100.0, 80.0])
     opts = {"tol_deg": 5.0, "p_max_kpa": 300.0, "tie_cmc_mcp": True, "margin_deg": 0.25, "active_limits_nm": LIMITS}
-    plan = C.plan_exercise(ro, target, **opts)
+    plan = planning.plan_exercise(ro, target, **opts)
     p = C.pressures_table(plan.pressures_kpa)
     first = check(None, "X", p, {})
-    cor = FC.correct_exercise(None, ro, "X", target, p, plan.equilibrium.joint_angles_deg, first,
-                              to_2d=lambda q: q, solver={}, gravity=None, tolerance_deg=5.0,
-                              limits_nm=np.array(LIMITS), plan_opts=opts, max_iterations=3)
+    cor = correction.correct_exercise(
+        None,
+        ro,
+        "X",
+        target,
+        p,
+        plan.equilibrium.joint_angles_deg,
+        first,
+        to_2d=lambda q: q,
+        solver={},
+        gravity=None,
+        tolerance_deg=5.0,
+        limits_nm=np.array(LIMITS),
+        plan_opts=opts,
+        max_iterations=3,
+    )
     assert not FC.outcome(cor.checks[cor.best], target, 5.0, np.array(LIMITS))[0]
     # the top chambers sit at 300 kPa already: more pressure is not available, so it stops without an FEA run
     assert cor.iterations == 0 and "at the 300 kPa limit" in cor.stop_reason and "MCP" in cor.stop_reason
@@ -301,7 +353,7 @@ def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
 
     import xarray as xr
 
-    from workflow import fea_standalone as FS
+    from workflow.fea_check import standalone as FS
 
     tried = []
 
@@ -309,18 +361,39 @@ def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
         tried.append((um.dim, um.h))
         ok = um.dim == 2 or um.h < 3.5  # the 4 mm 3D mesh "fails"
         curve = np.column_stack([np.linspace(0, um.length, 5), np.zeros(5)] + ([np.zeros(5)] if um.dim == 3 else []))
-        return SimpleNamespace(status=0 if ok else 1, load_factor=1.0 if ok else 0.4, tip_angle_deg=10.0 if ok else 4.0,
-                               backbone_mm=curve, backbone_ref_mm=curve, newton_iterations=5, wall_time_s=1.0,
-                               ndofs=int(um.mesh.p.size), max_penetration_mm=0.01, overlap_depth_mm=0.0,
-                               min_pocket=30.0)
+        return SimpleNamespace(
+            status=0 if ok else 1,
+            load_factor=1.0 if ok else 0.4,
+            tip_angle_deg=10.0 if ok else 4.0,
+            backbone_mm=curve,
+            backbone_ref_mm=curve,
+            newton_iterations=5,
+            wall_time_s=1.0,
+            ndofs=int(um.mesh.p.size),
+            max_penetration_mm=0.01,
+            overlap_depth_mm=0.0,
+            min_pocket=30.0,
+        )
 
     monkeypatch.setattr(FS, "solve_standalone", fake_solve)
-    plan = xr.Dataset({"pressure_kpa": (("exercise", "group", "chamber"), np.zeros((1, 4, 2))),
-                       "units_per_group": ("group", np.array([1, 1, 1, 1]))},
-                      coords={"exercise": ["TGE2"], "group": ["CMC", "MCP", "PIP", "DIP"], "chamber": ["top", "bottom"]})
-    ds = FS.standalone_dataset(plan, exercises=["TGE2"], models=["2d_plan", "3d_plan"], actuator_cfg={},
-                               h_2d_mm=2.0, h_3d_mm=[3.0, 4.0], solver={}, p2=np.zeros((1, 4, 2)),
-                               flag=np.zeros((1, 4), int))
+    plan = xr.Dataset(
+        {
+            "pressure_kpa": (("exercise", "group", "chamber"), np.zeros((1, 4, 2))),
+            "units_per_group": ("group", np.array([1, 1, 1, 1])),
+        },
+        coords={"exercise": ["TGE2"], "group": ["CMC", "MCP", "PIP", "DIP"], "chamber": ["top", "bottom"]},
+    )
+    ds = FS.standalone_dataset(
+        plan,
+        exercises=["TGE2"],
+        models=["2d_plan", "3d_plan"],
+        actuator_cfg={},
+        h_2d_mm=2.0,
+        h_3d_mm=[3.0, 4.0],
+        solver={},
+        p2=np.zeros((1, 4, 2)),
+        flag=np.zeros((1, 4), int),
+    )
     assert tried == [(2, 2.0), (3, 4.0), (3, 3.0)]  # coarse first, whatever the order given
     row = ds.sel(exercise="TGE2", model="3d_plan")
     assert float(row["h_used_mm"]) == 3.0 and bool(row["converged"]) and float(row["wall_time_s"]) == 2.0

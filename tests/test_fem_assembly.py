@@ -1,4 +1,4 @@
-"""The batched-matmul element assembly against central finite differences (issue 4 item 9).
+"""The batched-matmul element assembly against central finite differences.
 
 On small deformed 2D and 3D meshes with silicone (Mooney-Rivlin, id 0), paper
 (neo-Hooke, id 1) and a further neo-Hooke id, for the mean-dilatation and the
@@ -19,8 +19,11 @@ MAT = dict(fem.material_constants({}), neo_hooke={2: (0.5, 20.0)})  # MPa
 
 def _deformed_mesh(dim, seed=0):
     """A 3x2 quad / 2x2x1 hex block with ids 0, 1, 2 and a smooth plus random displacement (mm)."""
-    coords = [np.linspace(0.0, 2.0, 4), np.linspace(0.0, 1.0, 3)] if dim == 2 else \
-        [np.linspace(0.0, 2.0, 3), np.linspace(0.0, 1.0, 3), np.linspace(0.0, 1.0, 2)]
+    coords = (
+        [np.linspace(0.0, 2.0, 4), np.linspace(0.0, 1.0, 3)]
+        if dim == 2
+        else [np.linspace(0.0, 2.0, 3), np.linspace(0.0, 1.0, 3), np.linspace(0.0, 1.0, 2)]
+    )
     mesh, _, _ = fem.build_grid_mesh(coords)
     material = np.arange(mesh.t.shape[1]) % 3
     p = mesh.p

@@ -68,8 +68,13 @@ def _cantilever(L, load, formulation):
     c = T_PAP / 2 + T_SIL
     # through the thickness as the unit mesh at this element size (workflow.fem._mesh.layer_counts)
     n_pap, n_sil = fem.layer_counts({"bot_layer": T_SIL}, H)
-    ys = np.concatenate([np.linspace(-c, -T_PAP / 2, n_sil + 1), np.linspace(-T_PAP / 2, T_PAP / 2, n_pap + 1)[1:],
-                         np.linspace(T_PAP / 2, c, n_sil + 1)[1:]])
+    ys = np.concatenate(
+        [
+            np.linspace(-c, -T_PAP / 2, n_sil + 1),
+            np.linspace(-T_PAP / 2, T_PAP / 2, n_pap + 1)[1:],
+            np.linspace(T_PAP / 2, c, n_sil + 1)[1:],
+        ]
+    )
     xs = np.linspace(0.0, L, int(np.ceil(L / H - 1e-9)) + 1)
     mesh, _, _ = fem.build_grid_mesh([xs, ys])
     p = mesh.p

@@ -1,4 +1,4 @@
-"""Penalty contact of the unit's facing walls (issue 4 item 4): smoothness, balance, tangent, the former stall."""
+"""Penalty contact of the unit's facing walls: smoothness, balance, tangent, the former stall."""
 
 import numpy as np
 import pytest

@@ -11,23 +11,22 @@ With contact (2D): each code its own treatment on the same surfaces
 walls of ``um.contact_surfaces``), same penalty eps = 100 mu0 / 1 mm.
 """
 
+import felupe  # noqa: F401 - the cross-check is a test dependency: a broken install fails here
 import numpy as np
 import pytest
+import tensortrax  # noqa: F401
+from _felupe_unit import felupe_free_angles, straight_walls, wall_pairs
 
 from workflow import fem
-
-pytest.importorskip("felupe")
-pytest.importorskip("tensortrax")
-
-from _felupe_unit import felupe_free_angles, straight_walls, wall_pairs  # noqa: E402
 
 P_KPA = np.array([60.0, 180.0, 300.0])
 
 
 def _our_angles(um, p, contact, formulation="mixed"):
     """Our total free angle (deg) at pressures ``p`` (kPa), P_B = 0."""
-    res = fem.solve_unit(um, float(p[-1]), 0.0, "free", contact=contact, formulation=formulation,
-                         stops=tuple(p / p[-1]))
+    res = fem.solve_unit(
+        um, float(p[-1]), 0.0, "free", contact=contact, formulation=formulation, stops=tuple(p / p[-1])
+    )
     assert res.status == 0, res.reason
     at = {round(h["p_top_kpa"], 6): h["bending_angle_total_deg"] for h in res.history}
     return np.array([at[round(q, 6)] for q in p])

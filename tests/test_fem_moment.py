@@ -10,9 +10,9 @@ import pytest
 import yaml
 
 from workflow import fem
+from workflow.actuator.moment_check import compare, lookup, model_moment_nm, moment_check, unit_rotations_deg
+from workflow.actuator.unit_model import UnitModel
 from workflow.settings import REPO_ROOT
-from workflow.unit_model import UnitModel
-from workflow.unit_moment_check import compare, lookup, model_moment_nm, moment_check, unit_rotations_deg
 
 P_T, P_B = 60.0, 0.0
 
@@ -97,10 +97,18 @@ def test_compare_picks_the_hold_with_the_chain_stiffness():
     thf = np.array([10.0])
     mb = np.array([[0.05], [0.02]])  # face, backbone
     M = np.array([[0.0, 0.05, 0.025]])
-    fea = {"free_angle_deg": thf, "free_status": np.zeros(1, np.int32), "blocked_moment_nm": mb,
-           "blocked_status": np.zeros((2, 1), np.int32), "blocked_load_factor": np.ones((2, 1)),
-           "chain_free_deg": thf, "chain_moment_nm": M, "chain_mid_angle_deg": thf[0] * (1 - M / 0.05),
-           "chain_status": np.zeros((1, 3), np.int32), "wall_time_s": np.ones(1)}
+    fea = {
+        "free_angle_deg": thf,
+        "free_status": np.zeros(1, np.int32),
+        "blocked_moment_nm": mb,
+        "blocked_status": np.zeros((2, 1), np.int32),
+        "blocked_load_factor": np.ones((2, 1)),
+        "chain_free_deg": thf,
+        "chain_moment_nm": M,
+        "chain_mid_angle_deg": thf[0] * (1 - M / 0.05),
+        "chain_status": np.zeros((1, 3), np.int32),
+        "wall_time_s": np.ones(1),
+    }
     ds = compare(fea, [[100.0, 0.0]], fr, ["face", "backbone"])
     assert ds.attrs["best_end_hold"] == "face"
     np.testing.assert_allclose(ds["angle_error_deg"].sel(end_hold="face").values, 0.0, atol=1e-12)

@@ -1,10 +1,10 @@
-"""The unit-check writer: contract variables, units, CF flags, provenance, .vtu (issue 4 item 10)."""
+"""The unit-check writer: contract variables, units, CF flags, provenance, .vtu."""
 
 import meshio
 import numpy as np
 import xarray as xr
 
-from workflow import fem
+from workflow.actuator import entry_fem
 
 
 def test_unit_check_dataset_follows_the_contract(tmp_path):
@@ -14,7 +14,7 @@ def test_unit_check_dataset_follows_the_contract(tmp_path):
         "solver": {"initial_step": 0.25},
     }
     nc, vtu = tmp_path / "unit_check.nc", tmp_path / "unit_3d_300kpa.vtu"
-    fem.write_unit_check(nc, vtu, actuator, rule="unit_check", config_slice={"actuator": actuator})
+    entry_fem.write_unit_check(nc, vtu, actuator, rule="unit_check", config_slice={"actuator": actuator})
     ds = xr.open_dataset(nc)
     assert list(ds["model"].values) == ["2d"]
     assert list(ds["case"].values) == ["free", "blocked"]

@@ -1,4 +1,4 @@
-"""Verification of the nonlinear solver against closed forms (issue 4, item 7)."""
+"""Verification of the nonlinear solver against closed forms."""
 
 import numpy as np
 import pytest
@@ -37,7 +37,9 @@ def test_thick_walled_cylinder_inflation_matches_closed_form():
     p = np.stack([grid.p[0] * np.cos(grid.p[1]), grid.p[0] * np.sin(grid.p[1])])
     mesh = skfem.MeshQuad(p, grid.t)
     inner = faces[np.all(np.isclose(grid.p[0, faces], A), axis=1)]
-    fixed = np.concatenate([2 * np.flatnonzero(np.isclose(grid.p[1], 0.0)) + 1, 2 * np.flatnonzero(np.isclose(grid.p[1], np.pi / 2))])
+    fixed = np.concatenate(
+        [2 * np.flatnonzero(np.isclose(grid.p[1], 0.0)) + 1, 2 * np.flatnonzero(np.isclose(grid.p[1], np.pi / 2))]
+    )
     solid = fem.SolidAssembler(mesh, np.zeros(mesh.t.shape[1], int), MAT)
     p_in = 0.6  # MPa: the inner radius grows by about 60 %
     model = fem.Model(solid, pressures={"in": (inner, p_in)}, fixed=fixed)
@@ -128,8 +130,16 @@ def test_plain_q1_locks_where_mean_dilatation_does_not():
     ang = {}
     for mixed in (True, False):
         for ratio in (1e3, 1e4):
-            r = fem.solve_unit(um, 0.01, 0.0, "free", False, material={"bulk_ratio": ratio},
-                               formulation="mixed" if mixed else "displacement", solver=one)
+            r = fem.solve_unit(
+                um,
+                0.01,
+                0.0,
+                "free",
+                False,
+                material={"bulk_ratio": ratio},
+                formulation="mixed" if mixed else "displacement",
+                solver=one,
+            )
             ang[mixed, ratio] = r.bending_angle_deg
     # locking-free: insensitive to K in the incompressible limit
     assert ang[True, 1e4] == pytest.approx(ang[True, 1e3], rel=2e-2)

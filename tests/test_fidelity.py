@@ -1,4 +1,4 @@
-"""Speed against accuracy and the cheapest fidelity (issue 7 items 1 and 3), on small synthetic tables."""
+"""Speed against accuracy and the cheapest fidelity, on small synthetic tables."""
 
 from __future__ import annotations
 
@@ -6,19 +6,24 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from workflow import fidelity as FD
-from workflow.fidelity_run import fem_table
+from workflow.common import fidelity_choice
+from workflow.fidelity import analysis as FD
+from workflow.fidelity.entry import fem_table
 
 
 def test_fem_case_names_round_trip_and_cases_are_listed_once():
-    c = FD.FemCase("2d", 0.5, True)
-    assert c.name == "fem_2d_h0.5_contact" and FD.FemCase.parse(c.name) == c
-    cases = FD.fem_cases([{"model": "2d", "h_mm": [2.0, 1.0], "contact": True},
-                          {"model": "2d", "h_mm": [1.0], "contact": True},
-                          {"model": "3d", "h_mm": [4.0], "contact": False}])
+    c = fidelity_choice.FemCase("2d", 0.5, True)
+    assert c.name == "fem_2d_h0.5_contact" and fidelity_choice.FemCase.parse(c.name) == c
+    cases = fidelity_choice.fem_cases(
+        [
+            {"model": "2d", "h_mm": [2.0, 1.0], "contact": True},
+            {"model": "2d", "h_mm": [1.0], "contact": True},
+            {"model": "3d", "h_mm": [4.0], "contact": False},
+        ]
+    )
     assert [x.name for x in cases] == ["fem_2d_h2_contact", "fem_2d_h1_contact", "fem_3d_h4_nocontact"]
     with pytest.raises(ValueError, match="not an FE case"):
-        FD.FemCase.parse("fem_2d_coarse")
+        fidelity_choice.FemCase.parse("fem_2d_coarse")
 
 
 def test_pareto_front_keeps_exactly_the_undominated_methods():
@@ -32,11 +37,13 @@ def test_pareto_front_keeps_exactly_the_undominated_methods():
 
 def test_cheapest_within_tolerance_else_the_most_accurate():
     names = ["coarse", "mid", "fine"]
-    ch = FD.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.2, 0.05, 0.0], 0.1)
+    ch = fidelity_choice.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.2, 0.05, 0.0], 0.1)
     assert ch.method == "mid" and ch.met_tolerance and "coarse" in ch.reason  # the faster one outside is named
-    ch = FD.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.2, 0.05, 0.0], 0.1, converged=[True, False, True])
+    ch = fidelity_choice.cheapest_within(
+        "s", names, [1.0, 5.0, 50.0], [0.2, 0.05, 0.0], 0.1, converged=[True, False, True]
+    )
     assert ch.method == "fine"  # a method that did not converge is never taken
-    ch = FD.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.5, 0.3, np.nan], 0.1)
+    ch = fidelity_choice.cheapest_within("s", names, [1.0, 5.0, 50.0], [0.5, 0.3, np.nan], 0.1)
     assert ch.method == "mid" and not ch.met_tolerance and "no method within" in ch.reason
 
 
@@ -44,10 +51,15 @@ def _case(name, angles, moments, wall=1.0, status=(0, 0, 0)):
     p = np.array([60.0, 180.0, 300.0])
     st = np.array([[s, s] for s in status])
     return xr.Dataset(
-        {"bending_angle_deg": ("p_top_kpa", np.asarray(angles, float)),
-         "bending_moment_nm": ("p_top_kpa", np.asarray(moments, float)),
-         "status": (("p_top_kpa", "case"), st), "case_wall_time_s": ((), wall)},
-        coords={"p_top_kpa": p, "case": ["free", "blocked"]}, attrs={"case": name})
+        {
+            "bending_angle_deg": ("p_top_kpa", np.asarray(angles, float)),
+            "bending_moment_nm": ("p_top_kpa", np.asarray(moments, float)),
+            "status": (("p_top_kpa", "case"), st),
+            "case_wall_time_s": ((), wall),
+        },
+        coords={"p_top_kpa": p, "case": ["free", "blocked"]},
+        attrs={"case": name},
+    )
 
 
 def test_fem_table_measures_every_case_against_the_finest_converged_case_with_contact():
@@ -72,54 +84,66 @@ def test_fem_table_measures_every_case_against_the_finest_converged_case_with_co
 
 
 def test_fem_choice_picks_the_cheapest_case_within_tolerance(tmp_path):
-    from workflow.fidelity_run import write_fem_choice
+    from workflow.fidelity.entry import write_fem_choice
 
     files = []
-    for c in (_case("fem_2d_h2_contact", [8, 20, 28], [0.05, 0.12, 0.20], wall=1),
-              _case("fem_2d_h1_contact", [8.5, 21, 29.5], [0.05, 0.13, 0.21], wall=4),
-              _case("fem_2d_h0.5_contact", [8.6, 21.3, 30], [0.051, 0.13, 0.21], wall=20)):
+    for c in (
+        _case("fem_2d_h2_contact", [8, 20, 28], [0.05, 0.12, 0.20], wall=1),
+        _case("fem_2d_h1_contact", [8.5, 21, 29.5], [0.05, 0.13, 0.21], wall=4),
+        _case("fem_2d_h0.5_contact", [8.6, 21.3, 30], [0.051, 0.13, 0.21], wall=20),
+    ):
         path = tmp_path / f"{c.attrs['case']}.nc"
         c.to_netcdf(path)
         files.append(path)
     ds = write_fem_choice(files, tmp_path / "fem.nc", tolerance=0.03, config_slice={})
     assert str(ds["chosen_case"].sel(model_choice="2d").values) == "fem_2d_h1_contact"
-    act, attrs = FD.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}, "contact": {"enabled": False}}, ds, "2d")
+    act, attrs = fidelity_choice.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}, "contact": {"enabled": False}}, ds, "2d")
     assert act["mesh"]["h_2d_mm"] == 1.0 and act["contact"]["enabled"] is True
     assert attrs["fidelity"] == "fem_2d_h1_contact" and "within" in attrs["fidelity_reason"]
     # separate bounds: a tight one on the moment (1 mm is 2 % off at 60 kPa) moves the choice to the finest
-    strict = write_fem_choice(files, tmp_path / "fem_strict.nc", tolerance={"angle": 0.03, "moment": 0.01}, config_slice={})
+    strict = write_fem_choice(
+        files, tmp_path / "fem_strict.nc", tolerance={"angle": 0.03, "moment": 0.01}, config_slice={}
+    )
     assert str(strict["chosen_case"].sel(model_choice="2d").values) == "fem_2d_h0.5_contact"
     assert "blocked moment" in str(strict["choice_reason"].sel(model_choice="2d").values)
-    act, attrs = FD.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}}, None, "2d")
+    act, attrs = fidelity_choice.apply_fem_choice({"mesh": {"h_2d_mm": 2.0}}, None, "2d")
     assert act["mesh"]["h_2d_mm"] == 2.0 and attrs["fidelity"] == "config"
 
 
 def test_check_choice_takes_the_coarsest_mesh_whose_angles_stay_close():
     a2 = [[30.0, 10, 0], [37.0, 12, 0], [38.0, 12.5, 0], [38.5, 12.6, 0]]  # TGE2 by mesh
     a1 = [[9.0, 0, 1], [10.5, 0, 1], [9.8, 0, 1], [9.6, 0, 1]]  # TGE1 by mesh
-    study = xr.Dataset({"angle_deg": (("h_mm", "exercise", "joint"), np.stack([a1, a2], axis=1)),
-                        "status": (("h_mm", "exercise"), np.zeros((4, 2), int)),
-                        "wall_time_s": (("h_mm", "exercise"), np.array([[10.0] * 2, [20] * 2, [40] * 2, [90] * 2]))},
-                       coords={"h_mm": [3.0, 2.5, 2.0, 1.5], "exercise": ["TGE1", "TGE2"]})
-    h, why = FD.check_choice(study, 2.0, 2.0)
+    study = xr.Dataset(
+        {
+            "angle_deg": (("h_mm", "exercise", "joint"), np.stack([a1, a2], axis=1)),
+            "status": (("h_mm", "exercise"), np.zeros((4, 2), int)),
+            "wall_time_s": (("h_mm", "exercise"), np.array([[10.0] * 2, [20] * 2, [40] * 2, [90] * 2])),
+        },
+        coords={"h_mm": [3.0, 2.5, 2.0, 1.5], "exercise": ["TGE1", "TGE2"]},
+    )
+    h, why = fidelity_choice.check_choice(study, 2.0, 2.0)
     assert h == 2.5 and "TGE1, TGE2" in why
-    h, _ = FD.check_choice(study, 1.0, 2.0)  # TGE1 is 0.9 deg off at 2.5 mm, TGE2 1.5: 2 mm
+    h, _ = fidelity_choice.check_choice(study, 1.0, 2.0)  # TGE1 is 0.9 deg off at 2.5 mm, TGE2 1.5: 2 mm
     assert h == 2.0
     # a mesh whose contact penetrates beyond the bound is no valid check, however close its angles
     study["max_penetration_mm"] = (("h_mm", "exercise"), np.array([[0.05] * 2, [0.05, 0.2], [0.04] * 2, [0.03] * 2]))
-    h, why = FD.check_choice(study, 2.0, 2.0, penetration_bound_mm=0.1)
+    h, why = fidelity_choice.check_choice(study, 2.0, 2.0, penetration_bound_mm=0.1)
     assert h == 2.0 and "penetration <= 0.1 mm" in why
-    h, _ = FD.check_choice(None, 2.0, 1.75)
+    h, _ = fidelity_choice.check_choice(None, 2.0, 1.75)
     assert h == 1.75
 
 
 def test_loads_method_trusts_the_surfaces_only_where_the_study_found_them_accurate():
     from workflow.musculoskeletal.direct import loads_method
 
-    study = xr.Dataset({"rel_error": (("method", "point", "quantity"), np.array([[[0.01], [0.30]], [[0.0], [0.0]]])),
-                        "wall_time_s": (("method", "point"), [[0.01, 0.01], [2.0, 2.0]]),
-                        "inside_design": ("point", [True, False])},
-                       coords={"method": ["msk_rsm_selected", "msk_opensim"]})
+    study = xr.Dataset(
+        {
+            "rel_error": (("method", "point", "quantity"), np.array([[[0.01], [0.30]], [[0.0], [0.0]]])),
+            "wall_time_s": (("method", "point"), [[0.01, 0.01], [2.0, 2.0]]),
+            "inside_design": ("point", [True, False]),
+        },
+        coords={"method": ["msk_rsm_selected", "msk_opensim"]},
+    )
     m, why = loads_method(study, {"depth": 0.1, "length": 0.2, "breadth": 0.0}, 0.05, model_available=True)
     assert m == "rsm" and "inside" in why
     m, why = loads_method(study, {"depth": 1.5, "length": 0.0, "breadth": 0.0}, 0.05, model_available=True)
@@ -129,30 +153,46 @@ def test_loads_method_trusts_the_surfaces_only_where_the_study_found_them_accura
 
 
 def test_regressor_choice_with_a_tolerance_takes_the_fastest_good_enough():
-    from workflow.surrogates import select_regressor
+    from workflow.actuator.surrogates import select_regressor
 
     regs, targets, folds = ["knn", "rbf", "gp"], ["angle", "moment"], 2
     rmse = np.array([0.2, 0.02, 0.01])[:, None, None] * np.ones((3, 2, folds))
     pt = np.array([1e-4, 1e-3, 1e-2])[:, None, None] * np.ones((3, 2, folds))
-    cv = xr.Dataset({"rmse": (("regressor", "target", "fold"), rmse),
-                     "predict_time_s": (("regressor", "target", "fold"), pt),
-                     "target_std": ("target", [1.0, 1.0])},
-                    coords={"regressor": regs, "target": targets, "fold": np.arange(folds)})
+    cv = xr.Dataset(
+        {
+            "rmse": (("regressor", "target", "fold"), rmse),
+            "predict_time_s": (("regressor", "target", "fold"), pt),
+            "target_std": ("target", [1.0, 1.0]),
+        },
+        coords={"regressor": regs, "target": targets, "fold": np.arange(folds)},
+    )
     assert select_regressor(cv)[0] == "gp"  # the best score without a tolerance
     best, _, why = select_regressor(cv, tolerance=0.05)
     assert best == "rbf" and "knn" in why
 
 
 def test_speed_accuracy_dataset_marks_the_front_per_quantity():
-    ds = FD.speed_accuracy_dataset(["a", "b", "c"], ["q1", "q2"], [1.0, 2.0, 3.0],
-                                   np.array([[0.5, 0.1], [0.2, 0.3], [0.0, np.nan]]), family=["x"] * 3,
-                                   error_units={"q1": "1", "q2": "kPa"}, reference={"q1": "c", "q2": "a"})
+    ds = FD.speed_accuracy_dataset(
+        ["a", "b", "c"],
+        ["q1", "q2"],
+        [1.0, 2.0, 3.0],
+        np.array([[0.5, 0.1], [0.2, 0.3], [0.0, np.nan]]),
+        family=["x"] * 3,
+        error_units={"q1": "1", "q2": "kPa"},
+        reference={"q1": "c", "q2": "a"},
+    )
     np.testing.assert_array_equal(ds["pareto"].sel(quantity="q1").values, [True, True, True])
     np.testing.assert_array_equal(ds["pareto"].sel(quantity="q2").values, [True, False, False])
     assert str(ds["error_units"].sel(quantity="q2").values) == "kPa"
     # a method of another front group (another model's reference) never dominates
-    ds = FD.speed_accuracy_dataset(["2d_fast", "3d_slow", "3d_slower"], ["q"], [1.0, 5.0, 9.0],
-                                   np.array([[0.01], [0.05], [0.02]]), family=["x"] * 3, error_units={"q": "1"},
-                                   reference={"q": ""}, front_group=["2d", "3d", "3d"])
+    ds = FD.speed_accuracy_dataset(
+        ["2d_fast", "3d_slow", "3d_slower"],
+        ["q"],
+        [1.0, 5.0, 9.0],
+        np.array([[0.01], [0.05], [0.02]]),
+        family=["x"] * 3,
+        error_units={"q": "1"},
+        reference={"q": ""},
+        front_group=["2d", "3d", "3d"],
+    )
     np.testing.assert_array_equal(ds["pareto"].sel(quantity="q").values, [True, True, True])
-

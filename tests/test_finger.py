@@ -2,43 +2,18 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from _doubles import DENSITIES, MEASURES, SECTION, linear_springs, mean_finger, measures  # noqa: F401
 from scipy.optimize import brentq
 
-from workflow import finger as F
-
-SECTION = Path(__file__).resolve().parents[2] / "shared" / "data" / "finger_section_points_mean_finger.csv"
-
-# Table 2 means and SDs (mm), the paper's mean middle finger.
-MEASURES = {
-    "D3DP": (11.8, 1.52), "D3DIP": (12.7, 1.42), "D3MP": (14.1, 1.71), "D3PIP": (16.6, 1.66),
-    "D3PP": (17.3, 2.00), "D3MCP": (25.5, 2.85), "B3DP": (16.5, 1.83), "B3DIP": (16.8, 1.62),
-    "B3MP": (17.6, 1.99), "B3PIP": (19.4, 2.02), "B3PP": (18.6, 2.08), "L3DP": (26.5, 2.47),
-    "L3MP": (30.6, 2.74), "L3PP": (50.6, 3.79), "L3MC": (76.8, 6.69),
-}
-DENSITIES = {"flesh_proximal": 4000.0, "flesh_middle": 1500.0, "flesh_distal": 2000.0, "bone": 2000.0}
-
-
-def measures():
-    return {k: {"mean": m, "sd": s} for k, (m, s) in MEASURES.items()}
-
-
-def linear_springs(k=(0.058 / 90, 0.0285 / 100, 0.00324 / 80)):
-    return [F.JointSpring.linear(v) for v in k]
-
-
-def mean_finger(**kw):
-    dims = F.patient_dimensions_mm(measures(), {"depth": 0, "length": 0, "breadth": 0})
-    kw.setdefault("section_points", SECTION if SECTION.exists() else None)
-    return F.build_finger(dims, kw.pop("springs", linear_springs()), kw.pop("densities", DENSITIES), **kw)
+from workflow.cascade import finger as F
 
 
 def test_coded_levels_shift_by_one_sd_and_measurements_win():
-    dims = F.patient_dimensions_mm(measures(), {"depth": 0.5, "length": -1.0, "breadth": 0.0},
-                                   measurements_mm={"L3PP": 55.0})
+    dims = F.patient_dimensions_mm(
+        measures(), {"depth": 0.5, "length": -1.0, "breadth": 0.0}, measurements_mm={"L3PP": 55.0}
+    )
     assert dims["D3MCP"] == pytest.approx(25.5 + 0.5 * 2.85)
     assert dims["L3MP"] == pytest.approx(30.6 - 2.74)
     assert dims["B3PP"] == pytest.approx(18.6)
@@ -65,8 +40,6 @@ def test_spring_interpolates_monotone_and_continues_linearly():
 
 @pytest.mark.parametrize("section", [True, False])
 def test_masses_follow_densities_and_volume(section):
-    if section and not SECTION.exists():
-        pytest.skip("section points not available")
     f = mean_finger(section_points=SECTION if section else None)
     m = f.masses_kg
     # Elliptic cylinder bound: the proximal phalanx, 4000/2000 kg/m^3, is the heaviest.
@@ -77,19 +50,21 @@ def test_masses_follow_densities_and_volume(section):
         expect = (4000 * 0.75 + 2000 * 0.25) * a_o * 50.6 * 1e-9
         assert m[0] == pytest.approx(expect, rel=2e-3)
     # Doubling every density doubles every mass.
-    f2 = mean_finger(section_points=SECTION if section else None,
-                     densities={k: 2 * v for k, v in DENSITIES.items()})
+    f2 = mean_finger(section_points=SECTION if section else None, densities={k: 2 * v for k, v in DENSITIES.items()})
     np.testing.assert_allclose(f2.masses_kg, 2 * m, rtol=1e-12)
     # A longer finger (coded length +1) is heavier.
     dims = F.patient_dimensions_mm(measures(), {"depth": 0, "length": 1, "breadth": 0})
-    f3 = F.build_finger(dims, linear_springs(), DENSITIES, section_points=SECTION if section else None,
-                        reference_dims_mm={k: v for k, (v, _) in MEASURES.items()})
+    f3 = F.build_finger(
+        dims,
+        linear_springs(),
+        DENSITIES,
+        section_points=SECTION if section else None,
+        reference_dims_mm={k: v for k, (v, _) in MEASURES.items()},
+    )
     assert np.all(f3.masses_kg > m)
 
 
 def test_section_points_give_the_dummy_finger_moment_arms():
-    if not SECTION.exists():
-        pytest.skip("section points not available")
     f = mean_finger()
     arms = f.dorsal_y_m - f.joints_ref[:, 1]
     np.testing.assert_allclose(arms * 1e3, [10.14, 8.43, 5.67], atol=0.01)

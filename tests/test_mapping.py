@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from workflow import mapping, surrogates, sweep
-from workflow.provenance import write_dataset
+from workflow.actuator import entry, mapping, surrogates, sweep
+from workflow.common.provenance import write_dataset
 from workflow.settings import REPO_ROOT
 
 TABLE8 = REPO_ROOT / "resources" / "table08_planned_pressures_3d.csv"
@@ -38,8 +38,9 @@ def test_exact_scale_and_ratio_on_table8():
     ok = ds["status"] == 0
     assert int(ok.sum()) == 17
     np.testing.assert_allclose(ds["scale"].values[ok.values], 0.8, rtol=1e-7)
-    np.testing.assert_allclose(ds["pressure_2d_kpa"].values[ok.values], 0.8 * ds["pressure_3d_kpa"].values[ok.values],
-                               rtol=1e-7)
+    np.testing.assert_allclose(
+        ds["pressure_2d_kpa"].values[ok.values], 0.8 * ds["pressure_3d_kpa"].values[ok.values], rtol=1e-7
+    )
     np.testing.assert_allclose(ds["angle_2d_deg"].values[ok.values], ds["angle_3d_deg"].values[ok.values], atol=1e-7)
     np.testing.assert_allclose(ds["pressure_3d_kpa"].sel(exercise="TGE4", group="PIP").values, [291.84, 0.0])
 
@@ -58,8 +59,9 @@ def test_round_trip():
     pt = np.array([291.84, 215.31, 159.61, 0.0, 60.0])
     pb = np.array([0.0, 0.0, 259.95, 120.0, 30.0])
     fwd = mapping.map_pairs(pt, pb, theta_3d, theta_2d_of(0.7), p_max_2d_kpa=300.0)
-    back = mapping.map_pairs(fwd["p_top_2d_kpa"], fwd["p_bottom_2d_kpa"], theta_2d_of(0.7), theta_3d,
-                             p_max_2d_kpa=300.0)
+    back = mapping.map_pairs(
+        fwd["p_top_2d_kpa"], fwd["p_bottom_2d_kpa"], theta_2d_of(0.7), theta_3d, p_max_2d_kpa=300.0
+    )
     np.testing.assert_allclose(back["p_top_2d_kpa"], pt, atol=1e-6)
     np.testing.assert_allclose(back["p_bottom_2d_kpa"], pb, atol=1e-6)
     np.testing.assert_allclose(fwd["scale"] * back["scale"], 1.0, rtol=1e-8)
@@ -67,14 +69,18 @@ def test_round_trip():
 
 def _fitted(a, fea, regressor):
     """A surrogate fitted on a sweep of the double theta_2d_of(a)."""
+
     def solve(direction, scales):
         pt, pb = scales * direction[0], scales * direction[1]
         n = scales.size
         th = theta_2d_of(a)(pt, pb)
         return pt, pb, th, 0.001 * th, np.zeros(n, int), np.ones(n, int), np.zeros(n)
 
-    resp = sweep.merge_shards([sweep.run_shard(solve, shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=11,
-                                               n_pressures=12)], n_ratios=11, n_pressures=12)
+    resp = sweep.merge_shards(
+        [sweep.run_shard(solve, shard=0, n_shards=1, p_max_kpa=300.0, n_ratios=11, n_pressures=12)],
+        n_ratios=11,
+        n_pressures=12,
+    )
     return surrogates.fit_surrogate(resp, regressor, fea=fea)
 
 
@@ -82,8 +88,9 @@ def _fitted(a, fea, regressor):
 def test_on_fitted_surrogates(regressor, tol):
     s3, s2 = _fitted(1.0, "3d", regressor), _fitted(0.8, "2d", regressor)
     planned = mapping.read_planned_pressures(TABLE8)
-    ds = mapping.mapping_dataset(planned, s3.angle_deg, s2.angle_deg, p_max_2d_kpa=s2.p_max_kpa,
-                                 p_max_3d_kpa=s3.p_max_kpa)
+    ds = mapping.mapping_dataset(
+        planned, s3.angle_deg, s2.angle_deg, p_max_2d_kpa=s2.p_max_kpa, p_max_3d_kpa=s3.p_max_kpa
+    )
     ok = ds["status"].values == 0
     assert ok.sum() == 17
     np.testing.assert_allclose(ds["scale"].values[ok], 0.8, rtol=tol)
@@ -101,15 +108,16 @@ def test_dataset_roundtrip(tmp_path):
 
 def test_mapped_2d_pressures_stay_under_the_silicone_limit(tmp_path):
     """A weaker 2D unit needs 1.1 x the 3D pressure: within the 2D sweep (300 kPa), never beyond the material limit."""
-    from workflow.pressure_limit import PressureLimit
+    from workflow.actuator.pressure_limit import PressureLimit
 
-    paths = {fea: surrogates.save_surrogate(_fitted(a, fea, "rbf"), tmp_path / f"surrogate_{fea}.joblib")
-             for a, fea in ((1.0, "3d"), (1.1, "2d"))}
-    free = mapping.write_mapping(TABLE8, paths["3d"], paths["2d"], tmp_path / "free.nc", config_slice={})
+    paths = {
+        fea: surrogates.save_surrogate(_fitted(a, fea, "rbf"), tmp_path / f"surrogate_{fea}.joblib")
+        for a, fea in ((1.0, "3d"), (1.1, "2d"))
+    }
+    free = entry.write_mapping(TABLE8, paths["3d"], paths["2d"], tmp_path / "free.nc", config_slice={})
     assert float(free["pressure_2d_kpa"].max()) > 250.0
     limit = PressureLimit(250.0, "actuator.material.p_limit_kpa: test")
-    ds = mapping.write_mapping(TABLE8, paths["3d"], paths["2d"], tmp_path / "m.nc", config_slice={},
-                               material_limit=limit)
+    ds = entry.write_mapping(TABLE8, paths["3d"], paths["2d"], tmp_path / "m.nc", config_slice={}, material_limit=limit)
     assert float(ds["pressure_2d_kpa"].max()) <= 250.0
     assert int((ds["status"] == 2).sum()) > int((free["status"] == 2).sum())  # not reached within 250 kPa
     assert ds.attrs["p_max_2d_kpa"] == 250.0 and ds.attrs["p_limit_source"] == limit.source

@@ -1,4 +1,4 @@
-"""Physiology checks of the generated OpenSim finger model (issue 3).
+"""Physiology checks of the generated OpenSim finger model.
 
 Each test asserts something a wrong model would fail: a flexor with an
 extension moment arm, a passive curve that falls with flexion, scaling that
@@ -12,12 +12,12 @@ import math
 from pathlib import Path
 
 import numpy as np
+import opensim  # a hard dependency: a broken install fails here, it does not skip
 import pandas as pd
 import pytest
 import xarray as xr
 
-opensim = pytest.importorskip("opensim")
-
+from workflow.musculoskeletal import entry, entry_opensim
 from workflow.musculoskeletal import opensim_backend as ob  # noqa: E402
 from workflow.musculoskeletal import opensim_model as om  # noqa: E402
 from workflow.musculoskeletal import validation as val  # noqa: E402
@@ -101,7 +101,7 @@ def test_moment_arms_are_the_published_ones_at_the_mean_finger(original, params)
 def test_passive_rises_with_flexion_and_stays_below_active(original):
     passive = original["moment_nm"].sel(activation=0.01)
     active = original["moment_nm"].sel(activation=1.0)
-    assert (original["status"].where(np.isfinite(original["moment_nm"])) .fillna(0) == 0).all()
+    assert (original["status"].where(np.isfinite(original["moment_nm"])).fillna(0) == 0).all()
     for joint in om.JOINTS:
         lo, hi = om.JOINT_RANGE_DEG[joint]
         p = passive.sel(joint=joint, angle_deg=slice(0, hi)).values
@@ -129,8 +129,9 @@ def test_tone_free_passive_curve_is_a_spring(original):
         assert abs(curve[0]) < 1e-6
         assert np.all(np.diff(curve) > 0), f"{joint}: the relaxed finger must resist flexion more and more"
         # The 1 % tone of the paper's passive state pulls towards flexion: 0.01 lies below 0.
-        assert np.all(original["moment_nm"].sel(joint=joint, activation=0.01, angle_deg=slice(0, hi)).values
-                      < curve + 1e-9)
+        assert np.all(
+            original["moment_nm"].sel(joint=joint, activation=0.01, angle_deg=slice(0, hi)).values < curve + 1e-9
+        )
     assert float(tf.sel(joint="MCP", angle_deg=-45)) < 0  # hyperextension: the flexors resist
 
 
@@ -139,20 +140,24 @@ def test_joint_structures_have_the_published_stiffness(original, params, table):
     CoordinateLimitForces, and scaled per run by breadth x depth^2 of the joint."""
     k = om.joint_structure_stiffness(params, "F3")
     assert k["MCP"]["flexion"] == pytest.approx(0.0391)  # PMC7775510 Table 2, healthy H1-H4
-    assert k["PIP"]["flexion"] == pytest.approx(0.05e-2 * 180 / math.pi, rel=1e-3)  # Dionysian et al. 2005: 0.05 N cm/deg
+    assert k["PIP"]["flexion"] == pytest.approx(
+        0.05e-2 * 180 / math.pi, rel=1e-3
+    )  # Dionysian et al. 2005: 0.05 N cm/deg
     assert 0.3 < k["DIP"]["flexion"] / k["PIP"]["flexion"] < 1.0  # smaller joint, same size law
     js = original["joint_structure_moment_nm"]
     for joint in om.JOINTS:
         lo, hi = om.JOINT_RANGE_DEG[joint]
         for ang in (lo + 10.0 if lo < 0 else 30.0, hi):
             assert float(js.sel(joint=joint, angle_deg=ang)) == pytest.approx(
-                k[joint]["flexion" if ang > 0 else "extension"] * math.radians(ang), rel=1e-9)
+                k[joint]["flexion" if ang > 0 else "extension"] * math.radians(ang), rel=1e-9
+            )
         assert abs(float(js.sel(joint=joint, angle_deg=0.0))) < 1e-12
     # A run's stiffness: the published one times the joint's size factor relative to the mean finger.
     run = factors(table, "D+L+B+")
     ds = ob.sample_finger(params, run, [90.0], (0.01,), ("F3",), factors(table, "Original")).sel(finger="F3")
-    ratio = float(ds["joint_structure_moment_nm"].sel(joint="PIP", angle_deg=90.0)
-                  / js.sel(joint="PIP", angle_deg=90.0))
+    ratio = float(
+        ds["joint_structure_moment_nm"].sel(joint="PIP", angle_deg=90.0) / js.sel(joint="PIP", angle_deg=90.0)
+    )
     ref = factors(table, "Original")
     assert ratio == pytest.approx(om.joint_size_factor(run, "PIP") / om.joint_size_factor(ref, "PIP"), rel=1e-9)
     assert ratio > 1.0  # a bigger finger is stiffer (Dionysian et al. 2005)
@@ -183,16 +188,19 @@ def test_gravity_moment_palm_down(original, params):
     # Closed form at 0 deg for the DIP: weight of the DP times its centre's distance.
     dp = params["fingers"]["F3"]["segments_mm"]["DP"]
     m = params["density_kg_m3"]["DP"] * math.pi / 4 * dp["length"] * dp["breadth"] * dp["depth"] * 1e-9
-    assert float(g.sel(joint="DIP", angle_deg=0)) == pytest.approx(-m * params["gravity_m_s2"] * dp["length"] / 2e3,
-                                                                   rel=1e-6)
+    assert float(g.sel(joint="DIP", angle_deg=0)) == pytest.approx(
+        -m * params["gravity_m_s2"] * dp["length"] / 2e3, rel=1e-6
+    )
 
 
 def test_include_gravity_adds_the_holding_moment(params, table, original):
     ref = factors(table, "Original")
-    with_g = ob.sample_finger(params, ref, original["angle_deg"].values, (0.01, 1.0), ("F3",), ref,
-                              include_gravity=True).sel(finger="F3")
-    np.testing.assert_allclose(with_g["moment_nm"], original["moment_nm"] + original["gravity_moment_nm"],
-                               rtol=1e-6, atol=1e-9)
+    with_g = ob.sample_finger(
+        params, ref, original["angle_deg"].values, (0.01, 1.0), ("F3",), ref, include_gravity=True
+    ).sel(finger="F3")
+    np.testing.assert_allclose(
+        with_g["moment_nm"], original["moment_nm"] + original["gravity_moment_nm"], rtol=1e-6, atol=1e-9
+    )
 
 
 def test_opensim_scaling_moves_geometry_and_depth_sets_moment_arms(params, table):
@@ -216,8 +224,11 @@ def test_opensim_scaling_moves_geometry_and_depth_sets_moment_arms(params, table
     wide = ob.sample_finger(params, {b: (1.3, 1.0, 1.0) for b in om.BODIES}, [0.0, 90.0], (0.01, 1.0), ("F3",), ref)
     narrow = ob.sample_finger(params, {b: (0.8, 1.0, 1.0) for b in om.BODIES}, [0.0, 90.0], (0.01, 1.0), ("F3",), ref)
     ratio = deep["moment_arm_mm"] / d0["moment_arm_mm"]
-    np.testing.assert_allclose(ratio.where(np.abs(d0["moment_arm_mm"]) > 0).dropna("joint", how="all")
-                               .stack(k=ratio.dims).dropna("k"), 1.2, rtol=2e-3)
+    np.testing.assert_allclose(
+        ratio.where(np.abs(d0["moment_arm_mm"]) > 0).dropna("joint", how="all").stack(k=ratio.dims).dropna("k"),
+        1.2,
+        rtol=2e-3,
+    )
     # Breadth leaves the muscles alone; it scales the joint structures (breadth x depth^2 law).
     np.testing.assert_allclose(wide["muscle_moment_nm"], narrow["muscle_moment_nm"], rtol=1e-9, atol=1e-12)
     js = wide["joint_structure_moment_nm"].sel(angle_deg=90.0) / narrow["joint_structure_moment_nm"].sel(angle_deg=90.0)
@@ -241,12 +252,25 @@ def ccd_f3(params, table) -> tuple[xr.Dataset, pd.DataFrame]:
 #: point; passive, the joint structures' breadth x depth^2 size law (a deeper, wider finger is stiffer;
 #: the export's passive MCP falls with depth and rises with length, its PIP ignores breadth).
 KNOWN_TREND_DISAGREEMENTS = {
-    ("F3_P_MCP_90", "depth"), ("F3_P_MCP_90", "length"), ("F3_P_PIP_100", "depth"), ("F3_P_PIP_100", "breadth"),
+    ("F3_P_MCP_90", "depth"),
+    ("F3_P_MCP_90", "length"),
+    ("F3_P_PIP_100", "depth"),
+    ("F3_P_PIP_100", "breadth"),
     ("F3_P_PIP_90", "breadth"),
-    ("F3_A_MCP_90", "depth"), ("F3_A_PIP_100", "depth"), ("F3_A_MCP_90", "length"), ("F3_A_PIP_100", "length"),
+    ("F3_A_MCP_90", "depth"),
+    ("F3_A_PIP_100", "depth"),
+    ("F3_A_MCP_90", "length"),
+    ("F3_A_PIP_100", "length"),
 }
-F3_RESPONSES = ["F3_P_MCP_90", "F3_P_PIP_100", "F3_P_PIP_90", "F3_P_DIP_80", "F3_A_MCP_90", "F3_A_PIP_100",
-                "F3_A_DIP_80"]
+F3_RESPONSES = [
+    "F3_P_MCP_90",
+    "F3_P_PIP_100",
+    "F3_P_PIP_90",
+    "F3_P_DIP_80",
+    "F3_A_MCP_90",
+    "F3_A_PIP_100",
+    "F3_A_DIP_80",
+]
 
 
 @pytest.mark.parametrize("dimension", ["depth", "length", "breadth"])
@@ -283,7 +307,13 @@ def test_validation_compare_identity_and_missing_reference(tmp_path):
     y = 0.1 + 0.05 * design["depth"] - 0.02 * design["length"]
     ours = xr.Dataset(
         {"moment_nm": (("run", "finger", "joint", "angle_deg", "activation"), np.zeros((15, 1, 3, 1, 2)))},
-        coords={"run": runs, "finger": ["F3"], "joint": list(om.JOINTS), "angle_deg": [90.0], "activation": [0.01, 1.0]},
+        coords={
+            "run": runs,
+            "finger": ["F3"],
+            "joint": list(om.JOINTS),
+            "angle_deg": [90.0],
+            "activation": [0.01, 1.0],
+        },
     )
     ours["moment_nm"].loc[dict(finger="F3", joint="MCP", angle_deg=90.0, activation=0.01)] = y.to_numpy()
     ref = design.assign(F3_P_MCP_90=y.to_numpy())
@@ -296,8 +326,9 @@ def test_validation_compare_identity_and_missing_reference(tmp_path):
     mpath, cpath = tmp_path / "m.nc", tmp_path / "c.nc"
     ours.to_netcdf(mpath)
     xr.Dataset({d: ("run", design[d].to_numpy()) for d in val.DIMENSIONS}, coords={"run": runs}).to_netcdf(cpath)
-    out = val.write_validation(mpath, cpath, tmp_path / "absent.csv", tmp_path / "v.nc", tmp_path / "v.png",
-                               rule="test", config_slice={})
+    out = entry.write_validation(
+        mpath, cpath, tmp_path / "absent.csv", tmp_path / "v.nc", tmp_path / "v.png", rule="test", config_slice={}
+    )
     assert out.sizes["response"] == 0 and out.attrs["reference_missing"] == 1
     assert (tmp_path / "v.png").is_file()
 
@@ -307,17 +338,33 @@ def test_run_file_roundtrip_and_merge(params, table, tmp_path):
     ref = factors(table, "Original")
     model = om.write_model(params, tmp_path / "ref.osim", ("F3",), ref)
     scale = np.array([[factors(table, m)[b] for b in om.BODIES] for m in table.index])
-    scaling = xr.Dataset({"scale": (("run", "body", "axis"), scale)},
-                         coords={"run": range(1, 16), "marker": ("run", list(table.index)),
-                                 "body": list(om.BODIES), "axis": ["X", "Y", "Z"]})
+    scaling = xr.Dataset(
+        {"scale": (("run", "body", "axis"), scale)},
+        coords={
+            "run": range(1, 16),
+            "marker": ("run", list(table.index)),
+            "body": list(om.BODIES),
+            "axis": ["X", "Y", "Z"],
+        },
+    )
     scaling.to_netcdf(tmp_path / "scaling.nc")
     files = []
     for run in (9, 12):
         f = tmp_path / f"run{run}.nc"
-        ob.write_run(model, tmp_path / "scaling.nc", run, f, fingers=("F3",), angle_step_deg=45.0,
-                     activations=(0.01, 1.0), include_gravity=False, rule="test", config_slice={})
+        entry_opensim.write_run(
+            model,
+            tmp_path / "scaling.nc",
+            run,
+            f,
+            fingers=("F3",),
+            angle_step_deg=45.0,
+            activations=(0.01, 1.0),
+            include_gravity=False,
+            rule="test",
+            config_slice={},
+        )
         files.append(f)
-    merged = ob.write_merged(files[::-1], tmp_path / "moments.nc", rule="test", config_slice={})
+    merged = entry_opensim.write_merged(files[::-1], tmp_path / "moments.nc", rule="test", config_slice={})
     back = xr.open_dataset(tmp_path / "moments.nc")
     assert list(back["run"].values) == [9, 12]
     assert set(back["moment_nm"].dims) == {"run", "finger", "joint", "angle_deg", "activation"}
@@ -326,17 +373,18 @@ def test_run_file_roundtrip_and_merge(params, table, tmp_path):
     xr.testing.assert_allclose(back["moment_nm"], merged["moment_nm"])
     direct = ob.sample_finger(params, factors(table, "DM"), back["angle_deg"].values, (0.01, 1.0), ("F3",), ref)
     # Through the .osim file (text, rounded splines) the model differs slightly from the in-memory one.
-    np.testing.assert_allclose(back["moment_nm"].sel(run=12, finger="F3"), direct["moment_nm"].sel(finger="F3"),
-                               rtol=5e-3, atol=1e-5)
+    np.testing.assert_allclose(
+        back["moment_nm"].sel(run=12, finger="F3"), direct["moment_nm"].sel(finger="F3"), rtol=5e-3, atol=1e-5
+    )
     # Outside a joint's range: NaN, status "not_sampled".
     assert np.isnan(float(back["moment_nm"].sel(run=9, finger="F3", joint="DIP", angle_deg=90.0, activation=1.0)))
     assert int(back["status"].sel(run=9, finger="F3", joint="DIP", angle_deg=90.0, activation=1.0)) == 2
 
 
 def test_patient_from_coded_levels_only(params, config):
-    """A patient given only as coded levels (the paper's altered finger, CLARIFICATIONS 19) is sampled
+    """A patient given only as coded levels (the paper's altered finger) is sampled
     with the scale factors the DOE stage computes; the centre point reproduces the mean finger."""
-    from workflow import doe
+    from workflow.doe import ccd as doe
 
     anth = config["anthropometry"]
     levels = pd.DataFrame({"depth": [0.0, 0.5], "length": [0.0, 0.5], "breadth": [0.0, 0.5]}, index=[0, 1])

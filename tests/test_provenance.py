@@ -4,14 +4,20 @@ import numpy as np
 import xarray as xr
 from xarray.testing import assert_identical
 
-from workflow import provenance
+from workflow.common import provenance
 
 
 def test_roundtrip_keeps_data_attrs_and_provenance(tmp_path):
     ds = xr.Dataset(
-        {"a": ("x", np.array([1.0, np.nan, 3.0]), {"units": "N m", "long_name": "a"}),
-         "ok": ("x", np.array([True, False, True])),
-         "status": ("x", np.array([0, 1, 0], dtype="i4"), {"flag_values": [0, 1], "flag_meanings": "converged failed"})},
+        {
+            "a": ("x", np.array([1.0, np.nan, 3.0]), {"units": "N m", "long_name": "a"}),
+            "ok": ("x", np.array([True, False, True])),
+            "status": (
+                "x",
+                np.array([0, 1, 0], dtype="i4"),
+                {"flag_values": [0, 1], "flag_meanings": "converged failed"},
+            ),
+        },
         coords={"x": [1, 2, 3]},
     )
     path = provenance.write_dataset(ds, tmp_path / "d.nc", rule="test", config_slice={"k": 1}, title="t")
@@ -36,12 +42,24 @@ def test_config_hash_depends_only_on_the_slice():
 def test_code_files_follow_the_imports_of_the_modules_a_rule_uses():
     unit = provenance.code_files("fem")
     assert "workflow/fem/_solve.py" in unit and "workflow/fem/_linsolve.py" in unit  # relative imports, transitively
-    assert "workflow/fem/_coupled.py" not in unit  # the finger-actuator model does not rerun the unit sweeps
-    check = provenance.code_files("fea_check")
-    for f in ("workflow/fem/_coupled.py", "workflow/fem/_finger2d.py", "workflow/fem/__init__.py", "workflow/cascade.py"):
+    assert "workflow/fem/coupled.py" not in unit  # the finger-actuator model does not rerun the unit sweeps
+    check = provenance.code_files("scripts.fea_check")  # a rule's adapter: its entry point and all it imports
+    for f in (
+        "workflow/fem/coupled.py",
+        "workflow/fem/finger2d.py",
+        "workflow/fem/__init__.py",
+        "workflow/cascade/model.py",
+        "workflow/fea_check/entry.py",
+        "workflow/actuator/mapping.py",
+    ):
         assert f in check
-    assert "workflow/mapping.py" in check  # imported lazily inside a function
-    assert "workflow/provenance.py" in unit
+    assert "workflow/common/provenance.py" in unit
+    # the FE sweep's inputs hold the sweep and the engine, not the fitting code downstream of it
+    shard = provenance.code_files("scripts.sweep_shard")
+    assert "workflow/actuator/sweep.py" in shard and "workflow/fem/_contact.py" in shard
+    assert not {"workflow/actuator/surrogates.py", "workflow/actuator/mapping.py", "workflow/actuator/entry.py"} & set(
+        shard
+    )
 
 
 def test_code_files_names_an_unknown_module():
@@ -53,16 +71,35 @@ def test_code_files_names_an_unknown_module():
 
 # --- A damaged or foreign input: one line naming the file, what is wrong and the fix ----------------------
 def _response(tmp_path, drop=()):
-    ds = xr.Dataset({v: ("point", np.zeros(3)) for v in ("bending_angle_deg", "bending_moment_nm", "status", "converged",
-                                                          "mirrored", "newton_iterations", "wall_time_s")},
-                    coords={"p_top_kpa": ("point", [0.0, 150.0, 300.0]), "p_bottom_kpa": ("point", np.zeros(3))})
-    return provenance.write_dataset(ds.drop_vars(list(drop)), tmp_path / "results" / "actuator" / "response_3d.nc",
-                                    rule="sweep_merge", config_slice={}, title="t")
+    ds = xr.Dataset(
+        {
+            v: ("point", np.zeros(3))
+            for v in (
+                "bending_angle_deg",
+                "bending_moment_nm",
+                "status",
+                "converged",
+                "mirrored",
+                "newton_iterations",
+                "wall_time_s",
+            )
+        },
+        coords={"p_top_kpa": ("point", [0.0, 150.0, 300.0]), "p_bottom_kpa": ("point", np.zeros(3))},
+    )
+    return provenance.write_dataset(
+        ds.drop_vars(list(drop)),
+        tmp_path / "results" / "actuator" / "response_3d.nc",
+        rule="sweep_merge",
+        config_slice={},
+        title="t",
+    )
 
 
 def _one_line(err, path, *needles):
     msg = str(err.value)
-    assert "\n" not in msg and msg.startswith(str(path)) and msg.endswith("delete it and rerun: Snakemake recomputes it")
+    assert (
+        "\n" not in msg and msg.startswith(str(path)) and msg.endswith("delete it and rerun: Snakemake recomputes it")
+    )
     for needle in needles:
         assert needle in msg
 
@@ -97,12 +134,16 @@ def test_garbage_foreign_or_other_version_joblib_is_named(tmp_path):
     import joblib
     import pytest
 
-    from workflow import surrogates
+    from workflow.actuator import surrogates
 
-    cases = {"garbage.joblib": (b"\x80\x04 not a pickle at all", "not a readable joblib file"),
-             "foreign.joblib": ({"weights": [1, 2]}, "holds dict, not a surrogate"),
-             "old.joblib": ({"surrogate": surrogates.Surrogate("3d", "knn", {}, 300.0, 0), "sklearn_version": "0.1"},
-                            "fitted with scikit-learn 0.1")}
+    cases = {
+        "garbage.joblib": (b"\x80\x04 not a pickle at all", "not a readable joblib file"),
+        "foreign.joblib": ({"weights": [1, 2]}, "holds dict, not a surrogate"),
+        "old.joblib": (
+            {"surrogate": surrogates.Surrogate("3d", "knn", {}, 300.0, 0), "sklearn_version": "0.1"},
+            "fitted with scikit-learn 0.1",
+        ),
+    }
     for name, (content, needle) in cases.items():
         path = tmp_path / name
         if isinstance(content, bytes):

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from workflow import doe
+from workflow.doe import ccd as doe
 from workflow.musculoskeletal import moments as msm
 from workflow.musculoskeletal import patient_loads, rsm, table_backend
 
@@ -13,8 +13,18 @@ def design():
 
 def _quad(x, b):
     d, l, br = x["depth"].to_numpy(), x["length"].to_numpy(), x["breadth"].to_numpy()
-    return (b[0] + b[1] * d + b[2] * l + b[3] * br + b[4] * d**2 + b[5] * l**2 + b[6] * br**2
-            + b[7] * d * l + b[8] * d * br + b[9] * l * br)
+    return (
+        b[0]
+        + b[1] * d
+        + b[2] * l
+        + b[3] * br
+        + b[4] * d**2
+        + b[5] * l**2
+        + b[6] * br**2
+        + b[7] * d * l
+        + b[8] * d * br
+        + b[9] * l * br
+    )
 
 
 def test_quadratic_fit_recovers_known_coefficients(design, seed):
@@ -66,19 +76,24 @@ def test_patient_loads_zero_at_zero_targets_and_flags_outside(authors_moments, d
     m = table_backend.moments_from_export(table_backend.read_export(authors_moments), design)
     r = rsm.rsm_dataset(rsm.fit_all(design, msm.responses_from_moments(m, config["exercises"])))
     anth = config["anthropometry"]["measures"]
-    mean = patient_loads.joint_loads({"coded": {"depth": 0, "length": 0, "breadth": 0}}, m, r, design,
-                                     config["exercises"], anth)
+    mean = patient_loads.joint_loads(
+        {"coded": {"depth": 0, "length": 0, "breadth": 0}}, m, r, design, config["exercises"], anth
+    )
     assert float(mean["passive_moment_nm"].sel(exercise="TGE1").sum()) == 0.0
     assert float(mean["passive_moment_nm"].sel(exercise="TGE2", joint="MCP")) > 0
     assert bool(mean["in_design_range"])
     # active safety limit exceeds the passive moment at the same angle
-    assert float(mean["active_limit_nm"].sel(joint="MCP")) > float(mean["passive_moment_nm"].sel(exercise="TGE2", joint="MCP"))
+    assert float(mean["active_limit_nm"].sel(joint="MCP")) > float(
+        mean["passive_moment_nm"].sel(exercise="TGE2", joint="MCP")
+    )
     lo, hi = mean["passive_moment_lo_nm"], mean["passive_moment_hi_nm"]
     assert bool(((lo <= mean["passive_moment_nm"]) & (mean["passive_moment_nm"] <= hi)).all())
     big = patient_loads.joint_loads({"measurements_mm": {"L3PP": 60.0}}, m, r, design, config["exercises"], anth)
     assert not bool(big["in_design_range"])
     # a longer finger needs a larger passive MCP moment (the authors' data: length is the main effect)
-    assert float(big["passive_moment_nm"].sel(exercise="TGE2", joint="MCP")) > float(mean["passive_moment_nm"].sel(exercise="TGE2", joint="MCP"))
+    assert float(big["passive_moment_nm"].sel(exercise="TGE2", joint="MCP")) > float(
+        mean["passive_moment_nm"].sel(exercise="TGE2", joint="MCP")
+    )
 
 
 def test_response_names_roundtrip():

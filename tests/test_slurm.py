@@ -28,7 +28,6 @@ from pathlib import Path
 
 import pytest
 import yaml
-
 from _smoke import REPO, SNAKEMAKE, copy_workflow, local_overrides, planned_jobs, run_snakemake, snakemake_env
 
 HERE = Path(__file__).resolve().parent
@@ -42,8 +41,12 @@ RUN_TIMEOUT_S = 900  # the smoke run through SLURM; the plugin can hang without 
 # (OpenSim model, 15 sampling jobs, merge, RSM, both patients' loads) and one FE
 # sweep shard. The executor is what is tested here; the whole smoke DAG, with
 # its minutes of FEA, runs locally in tests/test_workflow.py (CI time budget).
-SLURM_TARGETS = ["results/validation/scaling.nc", "results/patients/mean/joint_loads.nc",
-                 "results/patients/p01/joint_loads.nc", "results/actuator/sweep/2d/shard0.nc"]
+SLURM_TARGETS = [
+    "results/validation/scaling.nc",
+    "results/patients/mean/joint_loads.nc",
+    "results/patients/p01/joint_loads.nc",
+    "results/actuator/sweep/2d/shard0.nc",
+]
 
 pytestmark = pytest.mark.slow
 
@@ -85,8 +88,10 @@ def slurm_cluster():
         pytest.fail(f"start_slurm.sh failed (exit {proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
     started = "STATE=started" in proc.stdout
     apt = re.search(r"apt-get install took (\d+) s", proc.stderr)
-    print(f"SLURM cluster {'started' if started else 'already running'} in {start_s:.1f} s"
-          f" (apt-get install: {apt.group(1) + ' s' if apt else 'not needed'})")
+    print(
+        f"SLURM cluster {'started' if started else 'already running'} in {start_s:.1f} s"
+        f" (apt-get install: {apt.group(1) + ' s' if apt else 'not needed'})"
+    )
     yield {"started": started, "start_s": start_s}
     if started:
         subprocess.run(["bash", str(STOP)], timeout=120)
@@ -97,7 +102,9 @@ def _squeue() -> list[dict[str, str]]:
     try:
         out = subprocess.run(
             ["squeue", "--states=all", "--noheader", "--format=%i|%j|%T|%k|%P"],
-            capture_output=True, text=True, timeout=30,
+            capture_output=True,
+            text=True,
+            timeout=30,
         ).stdout
     except subprocess.TimeoutExpired:
         return []
@@ -137,13 +144,27 @@ def test_smoke_workflow_through_slurm(slurm_cluster, tmp_path):
     offset = JOBCOMP.stat().st_size if JOBCOMP.exists() else 0
     log = tmp_path / "snakemake_slurm.log"
     # the README's command; a short first status check only to keep the test quick
-    cmd = [*SNAKEMAKE, *SLURM_TARGETS, "--profile", "profiles/slurm", *cfgs,
-           "--slurm-init-seconds-before-status-checks", "1"]
+    cmd = [
+        *SNAKEMAKE,
+        *SLURM_TARGETS,
+        "--profile",
+        "profiles/slurm",
+        *cfgs,
+        "--slurm-init-seconds-before-status-checks",
+        "1",
+    ]
     seen: dict[str, dict[str, str]] = {}  # SLURM job id -> its last squeue row
     t0 = time.monotonic()
     with log.open("w") as out:
-        proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT, text=True,
-                                env=snakemake_env(), start_new_session=True)
+        proc = subprocess.Popen(
+            cmd,
+            cwd=tmp_path,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=snakemake_env(),
+            start_new_session=True,
+        )
         try:
             while proc.poll() is None:
                 if time.monotonic() - t0 > RUN_TIMEOUT_S:
@@ -164,7 +185,9 @@ def test_smoke_workflow_through_slurm(slurm_cluster, tmp_path):
     if run_id:
         subprocess.run(["scancel", "--name", run_id.group(1)], capture_output=True, timeout=30)  # leftovers, if any
     print(f"smoke workflow through SLURM: {sum(expected.values())} jobs in {run_s:.1f} s")
-    assert proc.returncode == 0, f"snakemake through SLURM failed (exit {proc.returncode}) after {run_s:.0f} s:\n{text[-6000:]}"
+    assert proc.returncode == 0, (
+        f"snakemake through SLURM failed (exit {proc.returncode}) after {run_s:.0f} s:\n{text[-6000:]}"
+    )
     assert run_id, "the SLURM executor did not report its run ID:\n" + text[-3000:]
     run_id = run_id.group(1)
 
@@ -182,6 +205,7 @@ def test_smoke_workflow_through_slurm(slurm_cluster, tmp_path):
     assert {r["Partition"] for r in records} == {PARTITION}
     # ... and was visible in the queue while the run lasted, one job per planned rule instance
     mine = {i: row for i, row in seen.items() if row["name"] == run_id}
-    assert set(mine) == {r["JobId"] for r in records}, f"squeue saw {sorted(mine)}, jobcomp lists " \
-        f"{sorted(r['JobId'] for r in records)}"
+    assert set(mine) == {r["JobId"] for r in records}, (
+        f"squeue saw {sorted(mine)}, jobcomp lists {sorted(r['JobId'] for r in records)}"
+    )
     assert collections.Counter(_rule_of(row["comment"]) for row in mine.values()) == expected

@@ -9,11 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
-
-from workflow import surrogates
-from workflow.provenance import write_dataset
-
 from _doubles import double_response as response
+
+from workflow.actuator import surrogates
+from workflow.common.provenance import write_dataset
 
 
 @pytest.fixture(scope="module")

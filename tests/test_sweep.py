@@ -12,12 +12,10 @@ import logging
 import numpy as np
 import pytest
 import xarray as xr
-
-from workflow import sweep
-from workflow.provenance import write_dataset
-
-
 from _doubles import double_angle, double_moment  # noqa: E402
+
+from workflow.actuator import entry_fem, fe_solver, sweep
+from workflow.common.provenance import write_dataset
 
 
 class DoubleSolver:
@@ -47,8 +45,13 @@ class DoubleSolver:
             if progress is not None:
                 progress(k + 1)
         return {
-            "p_top_kpa": pt, "p_bottom_kpa": pb, "bending_angle_deg": angle, "bending_moment_nm": moment,
-            "status": status, "newton_iterations": np.full(scales.size, 4), "wall_time_s": np.full(scales.size, 0.01),
+            "p_top_kpa": pt,
+            "p_bottom_kpa": pb,
+            "bending_angle_deg": angle,
+            "bending_moment_nm": moment,
+            "status": status,
+            "newton_iterations": np.full(scales.size, 4),
+            "wall_time_s": np.full(scales.size, 0.01),
         }
 
 
@@ -57,7 +60,9 @@ DESIGN = dict(p_max_kpa=300.0, n_ratios=6, n_pressures=5)
 
 def run_all(solver, n_shards=3, **kw):
     design = {**DESIGN, **kw}
-    return [sweep.run_shard(solver, shard=i, n_shards=n_shards, **design) for i in range(min(n_shards, design["n_ratios"]))]
+    return [
+        sweep.run_shard(solver, shard=i, n_shards=n_shards, **design) for i in range(min(n_shards, design["n_ratios"]))
+    ]
 
 
 def test_ray_design_covers_the_lower_triangle():
@@ -127,7 +132,15 @@ def test_merge_rejects_missing_shard():
 def test_bad_status_code_is_an_error():
     def bad(direction, scales):
         n = scales.size
-        return (scales * direction[0], scales * direction[1], np.zeros(n), np.zeros(n), np.full(n, 7), np.zeros(n), np.zeros(n))
+        return (
+            scales * direction[0],
+            scales * direction[1],
+            np.zeros(n),
+            np.zeros(n),
+            np.full(n, 7),
+            np.zeros(n),
+            np.zeros(n),
+        )
 
     # An unknown code is a wiring error and is reported as a solver_error ray, not silently stored.
     ds = sweep.run_shard(bad, shard=0, n_shards=1, **DESIGN)
@@ -185,12 +198,12 @@ def test_shard_roundtrip_netcdf(tmp_path):
 
 def test_make_solver_rejects_unknown_model():
     with pytest.raises(ValueError, match="4d"):
-        sweep.make_solver("4d", {})
+        fe_solver.make_solver("4d", {})
 
 
 def test_real_solver_samples_a_ray_at_its_scales():
     """The wired FE solver (coarse 2D mesh) lands on the ray's scales with the right signs."""
-    solve_ray = sweep.make_solver("2d", {"mesh": {"h_2d_mm": 2.0}})
+    solve_ray = fe_solver.make_solver("2d", {"mesh": {"h_2d_mm": 2.0}})
     out = solve_ray((60.0, 0.0), np.array([0.5, 1.0]))
     np.testing.assert_allclose(out["p_top_kpa"], [30.0, 60.0])
     assert list(out["status"]) == [0, 0]
@@ -213,26 +226,50 @@ def test_snakemake_resumes_a_missing_shard_and_builds_downstream(tmp_path, repo)
 
     import yaml
 
-    small = {"sweep": {f: {"p_max_kpa": 300.0, "n_ratios": 4, "n_pressures": 4, "n_shards": 2} for f in ("2d", "3d")},
-             "surrogates": {"regressors": ["knn", "linear"]},
-             "fidelity": {"auto": False}}  # the sweeps on the config's meshes: no FE fidelity study here
+    small = {
+        "sweep": {f: {"p_max_kpa": 300.0, "n_ratios": 4, "n_pressures": 4, "n_shards": 2} for f in ("2d", "3d")},
+        "surrogates": {"regressors": ["knn", "linear"]},
+        "fidelity": {"auto": False},
+    }  # the sweeps on the config's meshes: no FE fidelity study here
     (tmp_path / "small.yaml").write_text(yaml.safe_dump(small))
     (tmp_path / "Snakefile").write_text(
         f'configfile: "{repo}/config/config.yaml"\n'
         f'include: "{repo}/rules/common.smk"\n'
-        f'include: "{repo}/rules/surrogates.smk"\n'
+        f'include: "{repo}/rules/actuator.smk"\n'
         'rule all_test:\n    input: "results/actuator/mapping_2d3d.nc"\n'
     )
     (tmp_path / "resources").mkdir()
     shutil.copy(repo / "resources" / "table08_planned_pressures_3d.csv", tmp_path / "resources")
     for fea in ("2d", "3d"):
         for i in range(2):
-            sweep.write_shard(tmp_path / f"results/actuator/sweep/{fea}/shard{i}.nc", fea=fea, shard=i,
-                              sweep_cfg=small["sweep"][fea], actuator_cfg={}, config_slice=small, solver=DoubleSolver())
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(tmp_path / "Snakefile"), "-d", str(tmp_path), "-c2",
-           "--configfile", str(repo / "config" / "config.yaml"), str(tmp_path / "small.yaml"),
-           # not mtime: the pre-made shards must not look older than code edited meanwhile
-           "--rerun-triggers", "params", "input", "code", "software-env"]
+            entry_fem.write_shard(
+                tmp_path / f"results/actuator/sweep/{fea}/shard{i}.nc",
+                fea=fea,
+                shard=i,
+                sweep_cfg=small["sweep"][fea],
+                actuator_cfg={},
+                config_slice=small,
+                solver=DoubleSolver(),
+            )
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(tmp_path / "Snakefile"),
+        "-d",
+        str(tmp_path),
+        "-c2",
+        "--configfile",
+        str(repo / "config" / "config.yaml"),
+        str(tmp_path / "small.yaml"),
+        # not mtime: the pre-made shards must not look older than code edited meanwhile
+        "--rerun-triggers",
+        "params",
+        "input",
+        "code",
+        "software-env",
+    ]
     run = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     mapped = xr.load_dataset(tmp_path / "results/actuator/mapping_2d3d.nc")
@@ -257,12 +294,18 @@ def test_snakemake_resumes_a_missing_shard_and_builds_downstream(tmp_path, repo)
 
 def test_samples_from_paths_exact_interpolated_and_failed():
     scales = np.arange(1, 11) / 10
-    free = {"status": 0, "wall_time_s": 6.0,
-            "history": [{"lam": s, "iterations": 3, "bending_angle_deg": 10 * s} for s in scales]}
+    free = {
+        "status": 0,
+        "wall_time_s": 6.0,
+        "history": [{"lam": s, "iterations": 3, "bending_angle_deg": 10 * s} for s in scales],
+    }
     lam_b = [0.05, 0.15, 0.3, 0.6, 1.0]
-    blocked = {"status": 0, "wall_time_s": 4.0,
-               "history": [{"lam": s, "iterations": 5, "bending_moment_nm": 0.2 * s} for s in lam_b]}
-    out = sweep.samples_from_paths((300.0, 60.0), scales, free, blocked)
+    blocked = {
+        "status": 0,
+        "wall_time_s": 4.0,
+        "history": [{"lam": s, "iterations": 5, "bending_moment_nm": 0.2 * s} for s in lam_b],
+    }
+    out = fe_solver.samples_from_paths((300.0, 60.0), scales, free, blocked)
     np.testing.assert_allclose(out["bending_angle_deg"], 10 * scales)  # exact steps
     np.testing.assert_allclose(out["bending_moment_nm"], 0.2 * scales)  # linear data: interpolation is exact
     np.testing.assert_allclose(out["p_bottom_kpa"], 60.0 * scales)
@@ -270,26 +313,45 @@ def test_samples_from_paths_exact_interpolated_and_failed():
     assert out["newton_iterations"].sum() == 10 * 3 + 5 * 5  # every Newton iteration counted once
     assert out["wall_time_s"].sum() == pytest.approx(10.0)
 
-    blocked_failed = {"status": 1, "wall_time_s": 4.0, "history": blocked["history"][:3] +
-                      [{"lam": 0.55, "iterations": 9, "bending_moment_nm": 0.11}]}
-    out = sweep.samples_from_paths((300.0, 60.0), scales, free, blocked_failed)
+    blocked_failed = {
+        "status": 1,
+        "wall_time_s": 4.0,
+        "history": blocked["history"][:3] + [{"lam": 0.55, "iterations": 9, "bending_moment_nm": 0.11}],
+    }
+    out = fe_solver.samples_from_paths((300.0, 60.0), scales, free, blocked_failed)
     np.testing.assert_array_equal(out["status"], [0, 0, 0, 0, 0, 1, 2, 2, 2, 2])
     assert np.all(np.isnan(out["bending_angle_deg"][5:])) and np.all(np.isnan(out["bending_moment_nm"][5:]))
     assert np.all(np.isfinite(out["bending_moment_nm"][:5]))
     # the samples plug into a shard: the wrapper the lead writes around workflow.fem has this shape
-    ds = sweep.run_shard(lambda d, s: sweep.samples_from_paths(d, s, free, blocked_failed), shard=0, n_shards=1,
-                         p_max_kpa=300.0, n_ratios=2, n_pressures=10)
+    ds = sweep.run_shard(
+        lambda d, s: fe_solver.samples_from_paths(d, s, free, blocked_failed),
+        shard=0,
+        n_shards=1,
+        p_max_kpa=300.0,
+        n_ratios=2,
+        n_pressures=10,
+    )
     assert int((ds["status"] == 0).sum()) == 10
 
 
 def test_samples_carry_the_overlap_checks_up_to_each_sample():
-    from workflow.sweep import samples_from_paths
+    from workflow.actuator.fe_solver import samples_from_paths
 
-    hist = [{"lam": s, "iterations": 3, "bending_angle_deg": 10 * s, "bending_moment_nm": 0.1 * s,
-             "max_penetration_mm": pen, "overlap_depth_mm": ov, "min_pocket_area_mm2": area}
-            for s, pen, ov, area in ((0.5, 0.01, 0.0, 30.0), (0.75, 0.03, 0.2, 20.0), (1.0, 0.02, 0.0, 25.0))]
-    out = samples_from_paths((300.0, 0.0), np.array([0.5, 1.0]), {"status": 0, "history": hist},
-                             {"status": 0, "history": hist})
+    hist = [
+        {
+            "lam": s,
+            "iterations": 3,
+            "bending_angle_deg": 10 * s,
+            "bending_moment_nm": 0.1 * s,
+            "max_penetration_mm": pen,
+            "overlap_depth_mm": ov,
+            "min_pocket_area_mm2": area,
+        }
+        for s, pen, ov, area in ((0.5, 0.01, 0.0, 30.0), (0.75, 0.03, 0.2, 20.0), (1.0, 0.02, 0.0, 25.0))
+    ]
+    out = samples_from_paths(
+        (300.0, 0.0), np.array([0.5, 1.0]), {"status": 0, "history": hist}, {"status": 0, "history": hist}
+    )
     np.testing.assert_allclose(out["max_penetration_mm"], [0.01, 0.03])
     np.testing.assert_allclose(out["overlap_depth_mm"], [0.0, 0.2])  # the worst state so far, not the last
     np.testing.assert_allclose(out["min_pocket_area_mm2"], [30.0, 20.0])

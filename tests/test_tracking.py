@@ -1,8 +1,4 @@
-import pytest
-
-pytest.importorskip("mlflow")
-
-from workflow import tracking  # noqa: E402
+from workflow.common import tracking
 
 
 def test_two_runs_logged_and_compared(tmp_path, capsys):
@@ -10,8 +6,15 @@ def test_two_runs_logged_and_compared(tmp_path, capsys):
     art = tmp_path / "a.txt"
     art.write_text("x")
     ids = [
-        tracking.log_run(uri=uri, experiment="t", patient=p, params={"patient": {"coded": {"depth": d}}},
-                         metrics={"active_limit_MCP_nm": m}, artifacts=[art], config_slice={"d": d})
+        tracking.log_run(
+            uri=uri,
+            experiment="t",
+            patient=p,
+            params={"patient": {"coded": {"depth": d}}},
+            metrics={"active_limit_MCP_nm": m},
+            artifacts=[art],
+            config_slice={"d": d},
+        )
         for p, d, m in [("a", 0.0, 5.0), ("b", 0.5, 6.0)]
     ]
     df = tracking.compare_runs(uri, *ids)

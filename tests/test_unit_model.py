@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _doubles import double_angle as free  # noqa: E402
+from _doubles import double_moment as blocked
+from _doubles import double_response
 
-from workflow import unit_model
-from workflow.unit_model import UnitModel
-
-
-from _doubles import double_angle as free, double_moment as blocked, double_response  # noqa: E402
+from workflow.actuator import unit_model
+from workflow.actuator.unit_model import UnitModel
 
 
 def k_diagonal(p):
@@ -62,8 +62,9 @@ def test_stiffness_near_the_diagonal_is_the_limit(model):
         # offset pair at +-5 kPa: the tanh curvature error is ~(10/250)^2/3
         assert k == pytest.approx(k_diagonal(p), rel=2e-3) if p > 0 else k > 0
     # continuity across the floor that switches to the offset estimate
-    np.testing.assert_allclose(model.stiffness_nm_per_deg(100.0, 99.999), model.stiffness_nm_per_deg(100.0, 100.0),
-                               rtol=5e-3)
+    np.testing.assert_allclose(
+        model.stiffness_nm_per_deg(100.0, 99.999), model.stiffness_nm_per_deg(100.0, 100.0), rtol=5e-3
+    )
     # at P_T = P_B the unit bends only under the external moment: theta = -M / k
     np.testing.assert_allclose(model.angle_deg(150.0, 150.0, 0.01), -0.01 / k_diagonal(150.0), rtol=5e-3)
 
@@ -113,7 +114,7 @@ def test_min_norm_against_brute_force(model):
 
 
 def test_on_a_fitted_surrogate():
-    from workflow import surrogates
+    from workflow.actuator import surrogates
 
     resp = double_response(6, 8, n_shards=1)
     s = surrogates.fit_surrogate(resp, "rbf", fea="3d")
@@ -126,7 +127,7 @@ def test_on_a_fitted_surrogate():
 
 def test_finite_everywhere_on_a_knn_surrogate():
     """The cascade needs a finite angle at every pressure pair, also on KNN's flat stretches."""
-    from workflow import surrogates
+    from workflow.actuator import surrogates
 
     resp = double_response(6, 5, n_shards=1)
     um = UnitModel.from_surrogate(surrogates.fit_surrogate(resp, "knn", fea="3d", k=4))

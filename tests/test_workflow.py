@@ -14,7 +14,6 @@ import time
 import pytest
 import xarray as xr
 import yaml
-
 from _smoke import SNAKEMAKE, snakemake_env
 from _smoke import copy_workflow as _copy_workflow
 from _smoke import local_overrides as _local_overrides
@@ -87,10 +86,16 @@ def test_editing_one_patient_reruns_only_that_patient(smoke):
     jobs = _planned_jobs(_run(workdir, "-n", *cfgs, str(edited)))
     assert jobs.get("patient_loads") == 1
     # only per-patient rules; the shared stages (DOE, moments, RSM, actuator sweeps) are reused
-    per_patient = {"patient_loads", "track_patient", "cascade_plan", "fea_check", "joint_loads_table",
-                   "cascade_plan_table",
-                   "stability_maps",  # the maps summarise every patient's design range and plans
-                   "fidelity_choices"}  # and this table every patient's source of loads
+    per_patient = {
+        "patient_loads",
+        "track_patient",
+        "cascade_plan",
+        "fea_check",
+        "joint_loads_table",
+        "cascade_plan_table",
+        "stability_maps",  # the maps summarise every patient's design range and plans
+        "fidelity_choices",
+    }  # and this table every patient's source of loads
     assert set(jobs) - {"all"} <= per_patient
     assert all(n == 1 for r, n in jobs.items() if r != "all")
     proc = _run(workdir, "-n", *cfgs, str(edited))
@@ -112,16 +117,25 @@ def test_a_killed_run_reruns_exactly_the_killed_jobs_and_matches_a_clean_run(tmp
         d.mkdir()
         _copy_workflow(d)
         # fidelity.auto off: the shards then depend on the config alone, not on the FE study; one ray per shard
-        (d / "config" / "kill.yaml").write_text(yaml.safe_dump(
-            {"fidelity": {"auto": False}, "sweep": {"2d": {"n_ratios": 2, "n_pressures": 2, "n_shards": 2}}}))
+        (d / "config" / "kill.yaml").write_text(
+            yaml.safe_dump(
+                {"fidelity": {"auto": False}, "sweep": {"2d": {"n_ratios": 2, "n_pressures": 2, "n_shards": 2}}}
+            )
+        )
         runs[name] = (d, ["--configfile", "config/smoke.yaml", str(_local_overrides(d)), "config/kill.yaml"])
     clean, cfgs = runs["clean"]
     _run(clean, *targets, "-c1", *cfgs)  # targets first: --configfile takes the rest
 
     killed, cfgs = runs["killed"]
     with open(killed / "snakemake.out", "w") as out:
-        proc = subprocess.Popen([*SNAKEMAKE, *targets, "-c1", *cfgs], cwd=killed, stdout=out, stderr=subprocess.STDOUT,
-                                env=snakemake_env(), start_new_session=True)
+        proc = subprocess.Popen(
+            [*SNAKEMAKE, *targets, "-c1", *cfgs],
+            cwd=killed,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=snakemake_env(),
+            start_new_session=True,
+        )
     incomplete = killed / ".snakemake" / "incomplete"
     deadline = time.monotonic() + 600
     done = []

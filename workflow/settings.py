@@ -18,6 +18,9 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from workflow.doe import ccd as doe
+from workflow.fem.material_stability import drucker_instabilities
+
 __all__ = ["ConfigError", "check_config", "load_config", "REPO_ROOT", "SCHEMA_PATH"]
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -53,7 +56,8 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
             if code[1:2] != finger[1:]:
                 raise ConfigError(
                     f"patients.{name}.measurements_mm.{code}: a finger-{code[1:2]} measure, but patients.{name}.finger "
-                    f"is {finger}; give that finger's codes ({code[0]}{finger[1:]}{code[2:]}, ...) or coded levels")
+                    f"is {finger}; give that finger's codes ({code[0]}{finger[1:]}{code[2:]}, ...) or coded levels"
+                )
             if code not in anth:
                 raise ConfigError(f"patients.{name}.measurements_mm.{code}: no anthropometry (mean, SD) for this code")
             if not value > 0:
@@ -72,12 +76,16 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
     fid = config.get("fidelity", {})
     for ex in fid.get("check", {}).get("exercises", []):
         if ex not in config["exercises"]:
-            raise ConfigError(f"fidelity.check.exercises: {ex!r} is no exercise (exercises: {sorted(config['exercises'])})")
+            raise ConfigError(
+                f"fidelity.check.exercises: {ex!r} is no exercise (exercises: {sorted(config['exercises'])})"
+            )
     for k, case in enumerate(fid.get("fem_cases", [])):
         models = {c["model"] for c in fid["fem_cases"] if c["contact"]}
         if case["model"] not in models:
-            raise ConfigError(f"fidelity.fem_cases[{k}]: model {case['model']} has no case with contact "
-                              "(the finest with contact is the reference)")
+            raise ConfigError(
+                f"fidelity.fem_cases[{k}]: model {case['model']} has no case with contact "
+                "(the finest with contact is the reference)"
+            )
     ms = config.get("musculoskeletal", {})
     if ms.get("backend", "table") == "table":
         path = Path(ms.get("table_path", ""))
@@ -91,27 +99,31 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
 
 def _check_coded_levels(name: str, patient: Mapping[str, Any], anthropometry: Mapping[str, Any]) -> list[str]:
     """Error beyond ``anthropometry.coded_bound``; a warning outside the CCD's design region (sphere and box)."""
-    from workflow import doe
 
     if "coded" in patient:
         x = {f: float(patient["coded"][f]) for f in doe.FACTORS}
         given = f"patients.{name}.coded"
     else:
-        x = doe.coded_levels(patient["measurements_mm"], anthropometry["measures"],
-                             float(anthropometry.get("coded_unit_sd", 1.0)))
+        x = doe.coded_levels(
+            patient["measurements_mm"], anthropometry["measures"], float(anthropometry.get("coded_unit_sd", 1.0))
+        )
         given = f"patients.{name}.measurements_mm"
     levels = ", ".join(f"{f} {v:.3g}" for f, v in x.items())
     bound = float(anthropometry.get("coded_bound", 3.0))
     far = [f for f, v in x.items() if not abs(v) <= bound]  # NaN counts as far
     if far:
-        raise ConfigError(f"{given}: coded levels ({levels}) beyond the plausible bound |x| <= {bound:g} "
-                          f"(anthropometry.coded_bound) in {', '.join(far)}: no finger of Table 2's population")
+        raise ConfigError(
+            f"{given}: coded levels ({levels}) beyond the plausible bound |x| <= {bound:g} "
+            f"(anthropometry.coded_bound) in {', '.join(far)}: no finger of Table 2's population"
+        )
     flags = doe.design_region_flags(x)
     if flags["in_sphere"] and flags["in_box"]:
         return []
-    return [f"{given}: coded levels ({levels}, ||x|| = {np.linalg.norm(list(x.values())):.3g}) lie outside the "
-            "design region (||x|| <= 1, |x_i| <= 1, Tables 3-4): the response surfaces extrapolate; the outputs "
-            "flag it (in_design_range = False)"]
+    return [
+        f"{given}: coded levels ({levels}, ||x|| = {np.linalg.norm(list(x.values())):.3g}) lie outside the "
+        "design region (||x|| <= 1, |x_i| <= 1, Tables 3-4): the response surfaces extrapolate; the outputs "
+        "flag it (in_design_range = False)"
+    ]
 
 
 def _check_pressure_bounds(config: Mapping[str, Any]) -> None:
@@ -122,42 +134,57 @@ def _check_pressure_bounds(config: Mapping[str, Any]) -> None:
     sweep, cascade, stab = config.get("sweep", {}), config.get("cascade", {}), config.get("stability", {})
     act = config.get("actuator", {})
     pressures = [(f"sweep.{m}.p_max_kpa", sweep.get(m, {}).get("p_max_kpa")) for m in ("2d", "3d")]
-    pressures += [("cascade.p_max_kpa", cascade.get("p_max_kpa")),
-                  ("stability.rays.p_max_kpa", stab.get("rays", {}).get("p_max_kpa")),
-                  ("stability.locking.p_top_kpa", stab.get("locking", {}).get("p_top_kpa"))]
-    pressures += [(f"actuator.unit_check.p_top_kpa[{i}]", p)
-                  for i, p in enumerate(act.get("unit_check", {}).get("p_top_kpa", []))]
-    pressures += [(f"actuator.moment_check.pairs_kpa[{i}]", max(p))
-                  for i, p in enumerate(act.get("moment_check", {}).get("pairs_kpa", []))]
-    pressures += [(f"fidelity.p_top_kpa[{i}]", p) for i, p in enumerate(config.get("fidelity", {}).get("p_top_kpa", []))]
+    pressures += [
+        ("cascade.p_max_kpa", cascade.get("p_max_kpa")),
+        ("stability.rays.p_max_kpa", stab.get("rays", {}).get("p_max_kpa")),
+        ("stability.locking.p_top_kpa", stab.get("locking", {}).get("p_top_kpa")),
+    ]
+    pressures += [
+        (f"actuator.unit_check.p_top_kpa[{i}]", p) for i, p in enumerate(act.get("unit_check", {}).get("p_top_kpa", []))
+    ]
+    pressures += [
+        (f"actuator.moment_check.pairs_kpa[{i}]", max(p))
+        for i, p in enumerate(act.get("moment_check", {}).get("pairs_kpa", []))
+    ]
+    pressures += [
+        (f"fidelity.p_top_kpa[{i}]", p) for i, p in enumerate(config.get("fidelity", {}).get("p_top_kpa", []))
+    ]
     for key, p in pressures:
         if p is not None and not float(p) <= limit:
-            raise ConfigError(f"{key} = {float(p):g} kPa exceeds actuator.material.p_limit_kpa = {limit:g} kPa "
-                              f"({source}): no chamber may be asked for more than the silicone bears")
+            raise ConfigError(
+                f"{key} = {float(p):g} kPa exceeds actuator.material.p_limit_kpa = {limit:g} kPa "
+                f"({source}): no chamber may be asked for more than the silicone bears"
+            )
     fea = cascade.get("surrogate", "3d")
     p_plan, p_sampled = cascade.get("p_max_kpa"), sweep.get(fea, {}).get("p_max_kpa")
     if p_plan is not None and p_sampled is not None and float(p_plan) > float(p_sampled):
-        raise ConfigError(f"cascade.p_max_kpa = {float(p_plan):g} kPa exceeds sweep.{fea}.p_max_kpa = "
-                          f"{float(p_sampled):g} kPa, the range the cascade.surrogate ({fea}) was sampled on: "
-                          "plans would stand on extrapolated unit responses")
+        raise ConfigError(
+            f"cascade.p_max_kpa = {float(p_plan):g} kPa exceeds sweep.{fea}.p_max_kpa = "
+            f"{float(p_sampled):g} kPa, the range the cascade.surrogate ({fea}) was sampled on: "
+            "plans would stand on extrapolated unit responses"
+        )
 
 
 def _check_material(material: Mapping[str, Any]) -> list[str]:
-    """mu0 > 0 and Drucker stability of the Table 5 law (:mod:`workflow.material_stability`)."""
-    from workflow.material_stability import drucker_instabilities
+    """mu0 > 0 and Drucker stability of the Table 5 law (:mod:`workflow.fem.material_stability`)."""
 
-    c = {k: float(material.get(k, d)) for k, d in
-         (("c10_mpa", 0.26056762), ("c01_mpa", 0.09754981), ("c20_mpa", 0.05750069))}
+    c = {
+        k: float(material.get(k, d))
+        for k, d in (("c10_mpa", 0.26056762), ("c01_mpa", 0.09754981), ("c20_mpa", 0.05750069))
+    }
     consts = ", ".join(f"{k} = {v:g}" for k, v in c.items())
     mu0 = 2.0 * (c["c10_mpa"] + c["c01_mpa"])
     if not mu0 > 0:
-        raise ConfigError(f"actuator.material: {consts} MPa give the initial shear modulus mu0 = 2 (c10 + c01) = "
-                          f"{mu0:g} MPa <= 0: the Mooney-Rivlin law is unstable at rest (Table 5 has c10 = 0.26057)")
+        raise ConfigError(
+            f"actuator.material: {consts} MPa give the initial shear modulus mu0 = 2 (c10 + c01) = "
+            f"{mu0:g} MPa <= 0: the Mooney-Rivlin law is unstable at rest (Table 5 has c10 = 0.26057)"
+        )
     found = drucker_instabilities(c["c10_mpa"], c["c01_mpa"], c["c20_mpa"])
     bad = [str(i) for i in found if i.within]
     if bad:
-        raise ConfigError(f"actuator.material: {consts} MPa are not Drucker-stable within stretches 0.5-2: "
-                          f"{'; '.join(bad)}")
+        raise ConfigError(
+            f"actuator.material: {consts} MPa are not Drucker-stable within stretches 0.5-2: {'; '.join(bad)}"
+        )
     return [f"actuator.material: {consts} MPa: {i} (outside stretches 0.5-2, inside 0.3-3)" for i in found]
 
 

@@ -29,19 +29,15 @@ import pandas as pd
 import xarray as xr
 from scipy.optimize import brentq
 
-from workflow.provenance import write_dataset
+from workflow.common.constants import CHAMBERS, GROUPS, MAPPING_STATUS
 
-__all__ = ["MAPPING_STATUS", "GROUPS", "CHAMBERS", "map_pairs", "read_planned_pressures", "mapping_dataset",
-           "write_mapping"]
+__all__ = ["map_pairs", "read_planned_pressures", "mapping_dataset"]
 
-MAPPING_STATUS = {0: "mapped", 1: "equal_pressures", 2: "outside_2d_grid"}
 _REASONS = {
     0: "",
     1: "P_T = P_B: zero 3D angle, no unique scale",
     2: "3D angle not reached within the 2D sweep's pressure range",
 }
-GROUPS = ("CMC", "MCP", "PIP", "DIP")
-CHAMBERS = ("top", "bottom")
 
 ArrayFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -90,6 +86,7 @@ def map_pairs(
         elif g_grid[j + 1] == 0.0:
             scale[i] = s[j + 1]
         else:
+
             def g(x, i=i):
                 return float(np.asarray(angle_2d(np.array([x * pt[i]]), np.array([x * pb[i]]))).ravel()[0] - th3[i])
 
@@ -135,61 +132,54 @@ def mapping_dataset(
         [np.stack([planned[f"P_{g}_T"].to_numpy(float), planned[f"P_{g}_B"].to_numpy(float)], axis=-1) for g in GROUPS],
         axis=1,
     )  # (exercise, group, chamber)
-    r = map_pairs(p3[..., 0], p3[..., 1], angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa,
-                  **kwargs)
+    r = map_pairs(
+        p3[..., 0], p3[..., 1], angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa, **kwargs
+    )
     p2 = np.stack([r["p_top_2d_kpa"], r["p_bottom_2d_kpa"]], axis=-1)
     dims2, dims3 = ("exercise", "group"), ("exercise", "group", "chamber")
     ds = xr.Dataset(
         {
             "pressure_3d_kpa": (dims3, p3, {"units": "kPa", "long_name": "planned 3D chamber pressure (Table 8)"}),
-            "pressure_2d_kpa": (dims3, p2, {"units": "kPa",
-                                            "long_name": "2D chamber pressure of the same ratio giving the 3D angle"}),
+            "pressure_2d_kpa": (
+                dims3,
+                p2,
+                {"units": "kPa", "long_name": "2D chamber pressure of the same ratio giving the 3D angle"},
+            ),
             "scale": (dims2, r["scale"], {"units": "1", "long_name": "scale s: 2D pressures = s * 3D pressures"}),
-            "angle_3d_deg": (dims2, r["angle_3d_deg"], {"units": "degree",
-                                                        "long_name": "3D surrogate free angle per unit at the 3D pair"}),
-            "angle_2d_deg": (dims2, r["angle_2d_deg"], {"units": "degree",
-                                                        "long_name": "2D surrogate free angle per unit at the 2D pair"}),
-            "status": (dims2, r["status"], {
-                "units": "1", "long_name": "mapping status",
-                "flag_values": np.array(sorted(MAPPING_STATUS), dtype=np.int32),
-                "flag_meanings": " ".join(MAPPING_STATUS[k] for k in sorted(MAPPING_STATUS)),
-            }),
-            "reason": (dims2, np.vectorize(_REASONS.get, otypes=[object])(r["status"]),
-                       {"units": "1", "long_name": "why no 2D pair was found (empty if mapped)"}),
-            "in_3d_grid": (dims2, r["in_3d_grid"], {"units": "1",
-                                                    "long_name": "3D pair inside the 3D sweep's pressure range"}),
+            "angle_3d_deg": (
+                dims2,
+                r["angle_3d_deg"],
+                {"units": "degree", "long_name": "3D surrogate free angle per unit at the 3D pair"},
+            ),
+            "angle_2d_deg": (
+                dims2,
+                r["angle_2d_deg"],
+                {"units": "degree", "long_name": "2D surrogate free angle per unit at the 2D pair"},
+            ),
+            "status": (
+                dims2,
+                r["status"],
+                {
+                    "units": "1",
+                    "long_name": "mapping status",
+                    "flag_values": np.array(sorted(MAPPING_STATUS), dtype=np.int32),
+                    "flag_meanings": " ".join(MAPPING_STATUS[k] for k in sorted(MAPPING_STATUS)),
+                },
+            ),
+            "reason": (
+                dims2,
+                np.vectorize(_REASONS.get, otypes=[object])(r["status"]),
+                {"units": "1", "long_name": "why no 2D pair was found (empty if mapped)"},
+            ),
+            "in_3d_grid": (
+                dims2,
+                r["in_3d_grid"],
+                {"units": "1", "long_name": "3D pair inside the 3D sweep's pressure range"},
+            ),
         },
         coords={"exercise": ex, "group": list(GROUPS), "chamber": list(CHAMBERS)},
     )
     ds.attrs["p_max_2d_kpa"] = float(p_max_2d_kpa)
     ds.attrs["p_max_3d_kpa"] = float(p_max_3d_kpa)
     ds.attrs["method"] = "scale s with theta_2D(s P_T, s P_B) = theta_3D(P_T, P_B), bracketing + Brent"
-    return ds
-
-
-def write_mapping(planned_csv: str | Path, surrogate_3d: str | Path, surrogate_2d: str | Path, out: str | Path, *,
-                  config_slice, rule: str = "mapping_2d3d", plot: str | Path | None = None,
-                  material_limit=None) -> xr.Dataset:
-    """Map Table 8 with the fitted 3D and 2D surrogates -> ``mapping_2d3d.nc`` (and the Fig. 17-like plot).
-
-    The 2D grid's edge is the smaller of the 2D surrogate's training range (its
-    sweep's p_max) and the silicone's limit ``material_limit``
-    (:func:`workflow.pressure_limit.material_limit`): no 2D pair beyond either.
-    """
-    from workflow.pressure_limit import PressureLimit, smallest
-    from workflow.surrogates import load_surrogate
-
-    s3, s2 = load_surrogate(surrogate_3d), load_surrogate(surrogate_2d)
-    limit = smallest(material_limit, PressureLimit(float(s2.p_max_kpa), "the range the 2D surrogate's sweep sampled"))
-    ds = mapping_dataset(read_planned_pressures(planned_csv), s3.angle_deg, s2.angle_deg,
-                         p_max_2d_kpa=limit.kpa, p_max_3d_kpa=s3.p_max_kpa)
-    ds.attrs["surrogate_3d"] = s3.regressor
-    ds.attrs["surrogate_2d"] = s2.regressor
-    ds.attrs["p_limit_source"] = limit.source
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title="2D pressures of the same ratio and free angle as the planned 3D pressures (Table 8)")
-    if plot is not None:
-        from workflow.plots_actuator import plot_mapping
-
-        plot_mapping(ds, plot)
     return ds

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-__all__ = ["plot_response", "plot_mapping", "plot_surrogate_cv"]
+__all__ = ["plot_response", "plot_mapping", "plot_surrogate_cv", "plot_moment_check"]
 
 
 def _save(fig, out: str | Path) -> None:
@@ -39,8 +39,12 @@ def plot_response(response: xr.Dataset, surrogate, out: str | Path, *, fea: str 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     colours = plt.cm.viridis(np.linspace(0, 0.9, levels.size))
     for (var, target, label), ax in zip(
-        [("bending_angle_deg", "angle", "free bending angle per unit (deg)"),
-         ("bending_moment_nm", "moment", "blocked moment per unit (N m)")], axes):
+        [
+            ("bending_angle_deg", "angle", "free bending angle per unit (deg)"),
+            ("bending_moment_nm", "moment", "blocked moment per unit (N m)"),
+        ],
+        axes,
+    ):
         for lev, c in zip(levels, colours):
             sel = lower & np.isclose(pt, lev)
             ok = sel & (response["status"].values == 0)
@@ -48,14 +52,16 @@ def plot_response(response: xr.Dataset, surrogate, out: str | Path, *, fea: str 
             ax.plot(pb[ok] / pt[ok], response[var].values[ok], "o", color=c, ms=4)
             if bad.any():
                 ax.plot(pb[bad] / pt[bad], np.zeros(bad.sum()), "x", color="r", ms=6)
-            ax.plot(ratio, surrogate.predict(target, lev, ratio * lev), "-", color=c, lw=1.2,
-                    label=f"P_T = {lev:.0f} kPa")
+            ax.plot(
+                ratio, surrogate.predict(target, lev, ratio * lev), "-", color=c, lw=1.2, label=f"P_T = {lev:.0f} kPa"
+            )
         ax.set_xlabel("pressure ratio P_B / P_T")
         ax.set_ylabel(label)
         ax.axhline(0, color="0.7", lw=0.6)
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"{fea.upper()} FE samples (markers; x = not converged) and {surrogate.regressor} surrogate (lines)",
-                 fontsize=9)
+    fig.suptitle(
+        f"{fea.upper()} FE samples (markers; x = not converged) and {surrogate.regressor} surrogate (lines)", fontsize=9
+    )
     fig.tight_layout()
     _save(fig, out)
 
@@ -66,8 +72,14 @@ def plot_mapping(mapping: xr.Dataset, out: str | Path) -> None:
     p3, p2 = mapping["pressure_3d_kpa"], mapping["pressure_2d_kpa"]
     for g, mk in zip(mapping["group"].values, "osD^"):
         for ch, fill in zip(mapping["chamber"].values, ("full", "none")):
-            a1.plot(p3.sel(group=g, chamber=ch).values, p2.sel(group=g, chamber=ch).values, mk, fillstyle=fill,
-                    label=f"{g} {ch}", ms=6)
+            a1.plot(
+                p3.sel(group=g, chamber=ch).values,
+                p2.sel(group=g, chamber=ch).values,
+                mk,
+                fillstyle=fill,
+                label=f"{g} {ch}",
+                ms=6,
+            )
     lim = float(np.nanmax([np.nanmax(p3.values), np.nanmax(p2.values) if np.isfinite(p2.values).any() else 0]))
     a1.plot([0, lim], [0, lim], "k:", lw=0.8, label="2D = 3D")
     a1.set_xlabel("3D pressure, Table 8 (kPa)")
@@ -115,3 +127,37 @@ def plot_surrogate_cv(cv: xr.Dataset, out: str | Path) -> None:
     fig.suptitle(f"{int(cv.attrs.get('folds', cv.sizes['fold']))}-fold CV on shared folds", fontsize=9)
     fig.tight_layout()
     _save(fig, out)
+
+
+def plot_moment_check(ds: xr.Dataset, out: str | Path) -> Path:
+    """Middle unit's rotation against the chain's couple (markers) and each hold's spring (lines), per pair."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    npt = ds.sizes["point"]
+    fig, axes = plt.subplots(1, npt, figsize=(4.2 * npt, 3.8), squeeze=False)
+    styles = {"face": "-", "backbone": ":"}
+    for i, ax in enumerate(axes[0]):
+        M, th = ds["chain_moment_nm"][i].values, ds["chain_mid_angle_deg"][i].values
+        ax.plot(M, th, "ko", label="chain of %d: middle unit" % ds.attrs.get("chain_units", 5))
+        mmax = np.nanmax(np.concatenate([M, ds["blocked_moment_nm"][:, i].values]))
+        m = np.linspace(0.0, mmax if np.isfinite(mmax) else 1.0, 20)
+        for k, hold in enumerate(ds["end_hold"].values):
+            thf, mb = float(ds["free_angle_deg"][i]), float(ds["blocked_moment_nm"][k, i])
+            if np.isfinite(thf) and np.isfinite(mb):
+                ax.plot(m, thf * (1 - m / mb), styles.get(str(hold), "--"), label=f"spring, {hold} hold")
+        ax.set_title(f"P = ({ds.p_top_kpa.values[i]:g}, {ds.p_bottom_kpa.values[i]:g}) kPa", fontsize=9)
+        ax.set_xlabel("end moment per unit (N m)")
+        ax.set_ylabel("unit rotation (deg)")
+        ax.axhline(0.0, color="0.6", lw=0.5)
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("A unit inside a chain under an end moment vs the unit model's spring per end hold", fontsize=9)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out

@@ -19,7 +19,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["PressureLimit", "material_limit", "smallest", "clip_pressures"]
+__all__ = ["PressureLimit", "material_limit", "smallest", "clip_pressures", "DEFAULT_LIMIT_KPA", "DEFAULT_SOURCE"]
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +56,11 @@ def clip_pressures(p_kpa, limit: PressureLimit, *, what: str) -> tuple[np.ndarra
     p = np.asarray(p_kpa, float)
     over = p > limit.kpa * (1 + 1e-12)  # a value scaled onto the bound is not over it
     if over.any():
-        log.warning("%s: %d pressure(s) up to %.1f kPa cut back to the limit %s", what, int(over.sum()),
-                    float(p[over].max()), limit)
+        log.warning(
+            "%s: %d pressure(s) up to %.1f kPa cut back to the limit %s",
+            what,
+            int(over.sum()),
+            float(p[over].max()),
+            limit,
+        )
     return np.minimum(p, limit.kpa), over

@@ -46,7 +46,8 @@ from sklearn.neighbors import KNeighborsRegressor
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from workflow.provenance import corrupt_input, load_joblib, open_result, write_dataset
+from workflow.common.fidelity_choice import cheapest_within
+from workflow.common.provenance import corrupt_input, load_joblib
 
 __all__ = [
     "REGRESSORS",
@@ -63,9 +64,8 @@ __all__ = [
     "fit_surrogate",
     "save_surrogate",
     "load_surrogate",
-    "write_surrogate_cv",
-    "write_surrogate",
     "density_study",
+    "as_callables",
 ]
 
 log = logging.getLogger(__name__)
@@ -87,8 +87,9 @@ class RBFRegressor(RegressorMixin, BaseEstimator):
         self.smoothing = smoothing
 
     def fit(self, X, y):
-        self.interp_ = RBFInterpolator(np.asarray(X, float), np.asarray(y, float), kernel=self.kernel,
-                                       smoothing=self.smoothing)
+        self.interp_ = RBFInterpolator(
+            np.asarray(X, float), np.asarray(y, float), kernel=self.kernel, smoothing=self.smoothing
+        )
         return self
 
     def predict(self, X):
@@ -149,8 +150,11 @@ def make_regressor(name: str, *, k: int = 4, random_state: int = 0) -> Pipeline:
 
 def training_data(response: xr.Dataset) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Converged samples of a response dataset: X = (P_T, P_B) in kPa, y per target."""
-    ok = (response["status"].values == 0) & np.isfinite(response["bending_angle_deg"].values) \
+    ok = (
+        (response["status"].values == 0)
+        & np.isfinite(response["bending_angle_deg"].values)
         & np.isfinite(response["bending_moment_nm"].values)
+    )
     X = np.column_stack([response["p_top_kpa"].values[ok], response["p_bottom_kpa"].values[ok]])
     Y = {t: response[var].values[ok].astype(float) for t, (var, _) in TARGETS.items()}
     return X, Y
@@ -215,7 +219,6 @@ def select_regressor(cv: xr.Dataset, tolerance: float | None = None) -> tuple[st
     regressor with the shortest prediction time whose score is within
     ``tolerance`` (model no more than needed), else the best score.
     """
-    from workflow.fidelity import cheapest_within
 
     score = (cv["rmse"] / cv["target_std"]).mean(("fold", "target"), skipna=False)
     if np.all(np.isnan(score.values)):
@@ -249,21 +252,32 @@ def surrogate_cv(
         X, Y = training_data(resp)
         log.info("CV %s: %d converged samples of %d, %d folds", fea, X.shape[0], resp.sizes["point"], folds)
         if X.shape[0] < max(folds, k + 1):
-            raise ValueError(f"{fea} sweep: {X.shape[0]} converged samples of {resp.sizes['point']}, too few for "
-                             f"{folds}-fold cross-validation of a {k}-nearest-neighbour surrogate; the sweep's "
-                             "status variable says where its rays stopped")
+            raise ValueError(
+                f"{fea} sweep: {X.shape[0]} converged samples of {resp.sizes['point']}, too few for "
+                f"{folds}-fold cross-validation of a {k}-nearest-neighbour surrogate; the sweep's "
+                "status variable says where its rays stopped"
+            )
         cv = cross_validate(X, Y, regressors=regressors, k=k, folds=folds, random_state=random_state)
         best, score, why = select_regressor(cv, tolerance)
         cv["score"] = score
         cv["selected"] = ("regressor", cv["regressor"].values == best)
         reasons.append(why)
-        log.info("CV %s: chosen %s (%s); scores %s", fea, best, why,
-                 dict(zip(score["regressor"].values, score.values.round(5))))
+        log.info(
+            "CV %s: chosen %s (%s); scores %s",
+            fea,
+            best,
+            why,
+            dict(zip(score["regressor"].values, score.values.round(5))),
+        )
         parts.append(cv.expand_dims(fea=[fea]))
     ds = xr.concat(parts, dim="fea")
     ds["choice_reason"] = ("fea", np.array(reasons, dtype=object))
-    ds["chosen"] = ("fea", np.array([str(ds["regressor"].values[ds["selected"].sel(fea=f).values][0])
-                                     for f in ds["fea"].values], dtype=object))
+    ds["chosen"] = (
+        "fea",
+        np.array(
+            [str(ds["regressor"].values[ds["selected"].sel(fea=f).values][0]) for f in ds["fea"].values], dtype=object
+        ),
+    )
     per_target = "deg for target angle, N m for target moment (see target_units)"
     ds = ds.assign_coords(target_units=("target", [TARGETS[t][1] for t in ds["target"].values]))
     attrs = {
@@ -281,9 +295,14 @@ def surrogate_cv(
     }
     for name, (units, long_name) in attrs.items():
         ds[name].attrs.update({"units": units, "long_name": long_name})
-    ds.attrs["selection_rule"] = SELECTION_RULE if tolerance is None else (
-        f"fidelity.auto: the fastest prediction among the regressors whose score (mean RMSE/std) is within "
-        f"{tolerance:g}, else the best score")
+    ds.attrs["selection_rule"] = (
+        SELECTION_RULE
+        if tolerance is None
+        else (
+            f"fidelity.auto: the fastest prediction among the regressors whose score (mean RMSE/std) is within "
+            f"{tolerance:g}, else the best score"
+        )
+    )
     ds.attrs["k_neighbours"] = int(k)
     ds.attrs["folds"] = int(folds)
     ds.attrs["random_state"] = int(random_state)
@@ -329,8 +348,14 @@ def fit_surrogate(response: xr.Dataset, regressor: str, *, fea: str, k: int = 4,
             warnings.simplefilter("ignore")
             models[t] = m.fit(X, y)
     p_max = float(max(response["p_top_kpa"].max(), response["p_bottom_kpa"].max()))
-    return Surrogate(fea=fea, regressor=regressor, models=models, p_max_kpa=p_max, n_samples=int(X.shape[0]),
-                     meta={"k": int(k), "random_state": int(random_state)})
+    return Surrogate(
+        fea=fea,
+        regressor=regressor,
+        models=models,
+        p_max_kpa=p_max,
+        n_samples=int(X.shape[0]),
+        meta={"k": int(k), "random_state": int(random_state)},
+    )
 
 
 def save_surrogate(surrogate: Surrogate, path: str | Path) -> Path:
@@ -348,26 +373,38 @@ def load_surrogate(path: str | Path) -> Surrogate:
 
     A damaged file, one that holds no surrogate of this version, or one fitted
     with another scikit-learn (its models may predict differently) raises
-    `workflow.provenance.CorruptInputError`, naming the file and the fix.
+    `workflow.common.provenance.CorruptInputError`, naming the file and the fix.
     """
     obj = load_joblib(path)
     s = obj.get("surrogate") if isinstance(obj, dict) else None
     if not isinstance(s, Surrogate) or any(not hasattr(s, f.name) for f in fields(Surrogate)):
-        raise corrupt_input(path, f"holds {type(s if s is not None else obj).__name__}, not a surrogate "
-                                  "written by this version of the workflow")
+        raise corrupt_input(
+            path,
+            f"holds {type(s if s is not None else obj).__name__}, not a surrogate "
+            "written by this version of the workflow",
+        )
     if obj.get("sklearn_version") != sklearn.__version__:
-        raise corrupt_input(path, f"fitted with scikit-learn {obj.get('sklearn_version')}, this is "
-                                  f"{sklearn.__version__} (its models may predict differently)")
+        raise corrupt_input(
+            path,
+            f"fitted with scikit-learn {obj.get('sklearn_version')}, this is "
+            f"{sklearn.__version__} (its models may predict differently)",
+        )
     return s
 
 
 def as_callables(surrogate: Surrogate) -> tuple[Callable, Callable]:
-    """(free_angle_deg, blocked_moment_nm) callables for `workflow.unit_model.UnitModel`."""
+    """(free_angle_deg, blocked_moment_nm) callables for `workflow.actuator.unit_model.UnitModel`."""
     return surrogate.angle_deg, surrogate.moment_nm
 
 
-def density_study(response: xr.Dataset, designs: Sequence[tuple[int, int]], *, regressors: Sequence[str] = ("knn",),
-                  k: int = 4, random_state: int = 0) -> xr.Dataset:
+def density_study(
+    response: xr.Dataset,
+    designs: Sequence[tuple[int, int]],
+    *,
+    regressors: Sequence[str] = ("knn",),
+    k: int = 4,
+    random_state: int = 0,
+) -> xr.Dataset:
     """How dense a sweep the surrogates need: fit on coarser sub-grids of a dense sweep, test on the rest.
 
     ``response`` is a merged sweep (points carry ``ratio`` and ``scale`` of their
@@ -406,41 +443,9 @@ def density_study(response: xr.Dataset, designs: Sequence[tuple[int, int]], *, r
                 out["mae"][i, j, t] = np.mean(np.abs(err))
                 out["max_abs_error"][i, j, t] = np.max(np.abs(err))
     dims = ("design", "regressor", "target")
-    ds = xr.Dataset({m: (dims, v) for m, v in out.items()},
-                    coords={"design": names, "regressor": list(regressors), "target": list(TARGETS)})
+    ds = xr.Dataset(
+        {m: (dims, v) for m, v in out.items()},
+        coords={"design": names, "regressor": list(regressors), "target": list(TARGETS)},
+    )
     ds["n_train"] = ("design", n_train)
     return ds
-
-
-def write_surrogate_cv(response_2d: str | Path, response_3d: str | Path, out: str | Path, *, k: int, folds: int,
-                       random_state: int, regressors: Sequence[str], config_slice, rule: str = "surrogate_cv",
-                       plot: str | Path | None = None, tolerance: float | None = None) -> xr.Dataset:
-    """CV of the regressors on both sweeps -> ``surrogate_cv.nc`` (and the CV chart)."""
-    responses = {fea: open_result(p) for fea, p in (("2d", response_2d), ("3d", response_3d))}
-    ds = surrogate_cv(responses, regressors=regressors, k=k, folds=folds, random_state=random_state,
-                      tolerance=tolerance)
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title="Cross-validation of surrogates of the unit's angle and moment over (P_T, P_B)")
-    if plot is not None:
-        from workflow.plots_actuator import plot_surrogate_cv
-
-        plot_surrogate_cv(ds, plot)
-    return ds
-
-
-def write_surrogate(response: str | Path, cv: str | Path, out: str | Path, *, fea: str, k: int, random_state: int,
-                    plot: str | Path | None = None) -> Surrogate:
-    """Fit the regressor the CV chose for ``fea`` on all its samples; save it (and the Fig. 11-like plot)."""
-    resp = open_result(response)
-    with open_result(cv) as c:
-        chosen = str(c["chosen"].sel(fea=fea).values)
-        why = str(c["choice_reason"].sel(fea=fea).values) if "choice_reason" in c else ""
-    s = fit_surrogate(resp, chosen, fea=fea, k=k, random_state=random_state)
-    s.meta.update({"fidelity": chosen, "fidelity_reason": why})
-    log.info("%s: fitted %s on %d samples (%s)", fea, chosen, s.n_samples, why)
-    save_surrogate(s, out)
-    if plot is not None:
-        from workflow.plots_actuator import plot_response
-
-        plot_response(resp, s, plot, fea=fea)
-    return s

@@ -24,7 +24,7 @@ The solver is injected: any callable
          status, newton_iterations, wall_time_s)
 
 with ``direction = (p_top_kpa, p_bottom_kpa)`` at s = 1 and one sample per
-requested scale, in order.  ``status`` uses `STATUS_FLAGS` (0 = converged);
+requested scale, in order.  ``status`` uses `SWEEP_SAMPLE_STATUS` (0 = converged);
 angles are the free bending angle per unit (deg), moments the blocked moment
 per unit (N m), both over the actuator's full width.
 If the callable accepts a ``progress`` keyword it is passed a function
@@ -37,38 +37,18 @@ import inspect
 import logging
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 import xarray as xr
 
-from workflow.provenance import open_result, write_dataset
-from workflow.runlog import solved
+from workflow.common.constants import SWEEP_SAMPLE_STATUS
+from workflow.common.provenance import open_result
 
-__all__ = [
-    "STATUS_FLAGS",
-    "SAMPLE_FIELDS",
-    "ray_design",
-    "shard_rays",
-    "n_points_total",
-    "run_shard",
-    "merge_shards",
-    "make_solver",
-    "samples_from_paths",
-    "write_shard",
-    "write_response",
-]
+__all__ = ["SAMPLE_FIELDS", "ray_design", "shard_rays", "n_points_total", "run_shard", "merge_shards", "CHECK_FIELDS"]
 
 log = logging.getLogger(__name__)
 
-#: Status codes of a sample (CF flag_values -> flag_meanings).  A solver
-#: wrapper must translate its own codes into these.
-STATUS_FLAGS: dict[int, str] = {
-    0: "converged",
-    1: "diverged",  # Newton failed after the allowed step cut-backs
-    2: "not_reached",  # an earlier load step of the same ray failed
-    3: "solver_error",  # the solver raised; the whole ray is recorded as failed
-}
 
 #: Fields a ray solve returns, in this order when it returns a tuple.
 SAMPLE_FIELDS = (
@@ -87,10 +67,22 @@ SAMPLE_FIELDS = (
 CHECK_FIELDS = ("max_penetration_mm", "overlap_depth_mm", "min_pocket_area_mm2", "min_pocket_volume_mm3")
 
 _VAR_ATTRS = {
-    "max_penetration_mm": {"units": "mm", "long_name": "largest penetration up to the sample (contact pairs or the overlap check)"},
-    "overlap_depth_mm": {"units": "mm", "long_name": "deepest boundary node inside another element up to the sample (0: none)"},
-    "min_pocket_area_mm2": {"units": "mm2", "long_name": "smallest pocket area of the unit up to the sample (2D; 36.4 at rest)"},
-    "min_pocket_volume_mm3": {"units": "mm3", "long_name": "smallest pocket volume of the unit up to the sample (3D; 509.6 at rest)"},
+    "max_penetration_mm": {
+        "units": "mm",
+        "long_name": "largest penetration up to the sample (contact pairs or the overlap check)",
+    },
+    "overlap_depth_mm": {
+        "units": "mm",
+        "long_name": "deepest boundary node inside another element up to the sample (0: none)",
+    },
+    "min_pocket_area_mm2": {
+        "units": "mm2",
+        "long_name": "smallest pocket area of the unit up to the sample (2D; 36.4 at rest)",
+    },
+    "min_pocket_volume_mm3": {
+        "units": "mm3",
+        "long_name": "smallest pocket volume of the unit up to the sample (3D; 509.6 at rest)",
+    },
     "bending_angle_deg": {
         "units": "degree",
         "long_name": "free bending angle per unit (backbone end rotation / 3), positive towards the palm",
@@ -169,9 +161,11 @@ def _as_samples(result: Any, n: int) -> dict[str, np.ndarray]:
     for k, v in fields.items():
         if v.shape != (n,):
             raise ValueError(f"solver returned {k} with shape {v.shape}, expected ({n},)")
-    bad = set(np.unique(fields["status"]).tolist()) - set(STATUS_FLAGS)
+    bad = set(np.unique(fields["status"]).tolist()) - set(SWEEP_SAMPLE_STATUS)
     if bad:
-        raise ValueError(f"solver returned status codes {sorted(bad)} outside STATUS_FLAGS {STATUS_FLAGS}")
+        raise ValueError(
+            f"solver returned status codes {sorted(bad)} outside SWEEP_SAMPLE_STATUS {SWEEP_SAMPLE_STATUS}"
+        )
     return fields
 
 
@@ -218,14 +212,23 @@ def run_shard(
         elapsed = time.perf_counter() - t0
         logger.info(
             "shard %d: points done %d of %d, %.3g s per point, elapsed %.1f s",
-            shard, n_done, total, elapsed / max(n_done, 1), elapsed,
+            shard,
+            n_done,
+            total,
+            elapsed / max(n_done, 1),
+            elapsed,
         )
 
     for j in rays:
         direction = design["direction_kpa"][j]
         logger.info(
             "shard %d: ray %d (P_B/P_T = %.3f, end point %.1f/%.1f kPa), %d samples",
-            shard, j, design["ratio"][j], direction[0], direction[1], scales.size,
+            shard,
+            j,
+            design["ratio"][j],
+            direction[0],
+            direction[1],
+            scales.size,
         )
         kwargs = {}
         if _accepts(solve_ray, "progress"):
@@ -272,8 +275,16 @@ def _points_dataset(d: Mapping[str, np.ndarray], *, mirrored: np.ndarray, source
         },
         coords={
             "point": np.arange(n, dtype=np.int32),
-            "p_top_kpa": ("point", np.asarray(d["p_top_kpa"], dtype=float), {"units": "kPa", "long_name": "top chamber pressure P_T"}),
-            "p_bottom_kpa": ("point", np.asarray(d["p_bottom_kpa"], dtype=float), {"units": "kPa", "long_name": "bottom chamber pressure P_B"}),
+            "p_top_kpa": (
+                "point",
+                np.asarray(d["p_top_kpa"], dtype=float),
+                {"units": "kPa", "long_name": "top chamber pressure P_T"},
+            ),
+            "p_bottom_kpa": (
+                "point",
+                np.asarray(d["p_bottom_kpa"], dtype=float),
+                {"units": "kPa", "long_name": "bottom chamber pressure P_B"},
+            ),
         },
     )
     for name, attrs in _VAR_ATTRS.items():
@@ -283,8 +294,8 @@ def _points_dataset(d: Mapping[str, np.ndarray], *, mirrored: np.ndarray, source
         {
             "long_name": "solver status of the sample",
             "units": "1",
-            "flag_values": np.array(sorted(STATUS_FLAGS), dtype=np.int32),
-            "flag_meanings": " ".join(STATUS_FLAGS[k] for k in sorted(STATUS_FLAGS)),
+            "flag_values": np.array(sorted(SWEEP_SAMPLE_STATUS), dtype=np.int32),
+            "flag_meanings": " ".join(SWEEP_SAMPLE_STATUS[k] for k in sorted(SWEEP_SAMPLE_STATUS)),
         }
     )
     ds["point"].attrs.update({"long_name": "sample index", "units": "1"})
@@ -303,8 +314,18 @@ def merge_shards(shards: Iterable[xr.Dataset | str | Path], *, n_ratios: int, n_
     parts = [open_result(s) if isinstance(s, (str, Path)) else s for s in shards]
     if not parts:
         raise ValueError("no shards to merge")
-    keys = ["p_top_kpa", "p_bottom_kpa", "bending_angle_deg", "bending_moment_nm", "status",
-            "newton_iterations", "wall_time_s", "ray", "ratio", "scale"]
+    keys = [
+        "p_top_kpa",
+        "p_bottom_kpa",
+        "bending_angle_deg",
+        "bending_moment_nm",
+        "status",
+        "newton_iterations",
+        "wall_time_s",
+        "ray",
+        "ratio",
+        "scale",
+    ]
     keys += [k for k in CHECK_FIELDS if all(k in p for p in parts)]  # a twin's checks hold for its mirror too
     d = {k: np.concatenate([p[k].values for p in parts]) for k in keys}
     rays, counts = np.unique(d["ray"], return_counts=True)
@@ -328,155 +349,3 @@ def merge_shards(shards: Iterable[xr.Dataset | str | Path], *, n_ratios: int, n_
     mirrored = np.r_[np.zeros(n, dtype=bool), np.ones(twin.size, dtype=bool)]
     source = np.r_[np.full(n, -1), twin]
     return _points_dataset(full, mirrored=mirrored, source=source)
-
-
-def _get(obj: Any, key: str, default: Any = None) -> Any:
-    return obj.get(key, default) if isinstance(obj, Mapping) else getattr(obj, key, default)
-
-
-def samples_from_paths(direction: Sequence[float], scales: np.ndarray, free: Any, blocked: Any,
-                       *, lam_tol: float = 1e-9) -> dict[str, np.ndarray]:
-    """Samples at ``scales`` from a free and a blocked continuation solve along one ray.
-
-    ``free`` and ``blocked`` are path results (objects or mappings) with
-    ``status`` (0 = reached load factor 1), ``wall_time_s`` and ``history``: one
-    record per accepted load step with ``lam`` (load factor), ``iterations``
-    and the measured ``bending_angle_deg`` (free) / ``bending_moment_nm``
-    (blocked), e.g. `workflow.fem.UnitResult`.
-
-    A scale equal to an accepted load factor (within ``lam_tol``) takes that
-    step's value; otherwise the value is interpolated linearly in the load
-    factor between the accepted steps around it, with the unloaded state
-    (lam = 0: straight, no moment; true without gravity) below the first step.
-    Ask the solver to land on the scales to avoid interpolating.  Scales beyond
-    the last accepted step of either case are not converged: the first gets
-    status ``diverged``, the rest ``not_reached``.  Newton iterations are those
-    of the steps since the previous sample (both cases); the ray's wall time is
-    shared among the samples in proportion to them.
-    """
-    scales = np.asarray(scales, float)
-    out_vals = {}
-    reached = np.ones(scales.size, dtype=bool)
-    iters = np.zeros(scales.size)
-    n_interp = 0
-    for case, key in ((free, "bending_angle_deg"), (blocked, "bending_moment_nm")):
-        hist = list(_get(case, "history", []) or [])
-        lam = np.array([0.0] + [float(h["lam"]) for h in hist])
-        val = np.array([0.0] + [float(h[key]) for h in hist])
-        its = np.array([0.0] + [float(h.get("iterations", 0)) for h in hist])
-        lam_last = lam[-1] if _get(case, "status", 0) != 0 else max(lam[-1], 1.0)
-        reached &= scales <= lam_last + lam_tol
-        v = np.interp(scales, lam, val)
-        exact = np.isclose(scales[:, None], lam[None, 1:], rtol=0, atol=lam_tol).any(axis=1)
-        n_interp += int(np.count_nonzero(~exact & reached))
-        cum = np.cumsum(its)
-        idx = np.searchsorted(lam, scales - lam_tol)  # first step at or after each scale
-        idx = np.minimum(idx, lam.size - 1)
-        at = cum[idx]
-        iters += np.diff(np.r_[0.0, at])
-        out_vals[key] = v
-    if n_interp:
-        log.warning("ray %s: %d sample values interpolated between load steps", tuple(direction), n_interp)
-    checks = {}
-    for key, worst in (("max_penetration_mm", np.max), ("overlap_depth_mm", np.max), ("min_pocket_area_mm2", np.min),
-                       ("min_pocket_volume_mm3", np.min)):
-        rec = [(float(h["lam"]), float(h[key])) for case in (free, blocked) for h in (_get(case, "history", []) or [])
-               if key in h]
-        if not rec:
-            continue
-        lam_k, val_k = np.array(rec).T
-        checks[key] = np.array([worst(val_k[lam_k <= s + lam_tol]) if np.any(lam_k <= s + lam_tol) else np.nan
-                                for s in scales])
-    status = np.zeros(scales.size, dtype=int)
-    not_reached = np.flatnonzero(~reached)
-    if not_reached.size:
-        status[not_reached] = 2
-        status[not_reached[0]] = 1
-    for key in out_vals:
-        out_vals[key][~reached] = np.nan
-    wall = float(_get(free, "wall_time_s", 0.0)) + float(_get(blocked, "wall_time_s", 0.0))
-    share = iters / iters.sum() if iters.sum() > 0 else np.full(scales.size, 1.0 / scales.size)
-    return {
-        "p_top_kpa": scales * float(direction[0]),
-        "p_bottom_kpa": scales * float(direction[1]),
-        "bending_angle_deg": out_vals["bending_angle_deg"],
-        "bending_moment_nm": out_vals["bending_moment_nm"],
-        "status": status,
-        "newton_iterations": iters.astype(int),
-        "wall_time_s": wall * share,
-        **checks,
-    }
-
-
-def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Sequence[float], np.ndarray], Any]:
-    """The ray solver of FE model ``fea`` ('2d' or '3d') for the sweep.
-
-    Returns ``solve_ray(direction, scales)``: the free and the blocked case of
-    :func:`workflow.fem.solve_unit` along (P_T, P_B) = s * direction, with load
-    steps landing exactly on ``scales`` (so the samples are solutions, not
-    interpolations), turned into the fields of `SAMPLE_FIELDS` by
-    :func:`samples_from_paths`.  The mesh is built once per job.
-    """
-    from . import fem  # heavy import only where a sweep runs
-
-    if fea not in ("2d", "3d"):
-        raise ValueError(f"unknown FE model {fea!r}: expected '2d' or '3d'")
-    dim = 2 if fea == "2d" else 3
-    mesh = fem.unit_mesh_from_config(actuator_config, dim)
-
-    def solve_ray(direction: Sequence[float], scales: np.ndarray) -> dict[str, np.ndarray]:
-        p_top, p_bottom = (float(v) for v in direction)
-        stops = tuple(float(v) for v in np.asarray(scales, float))
-        paths = {}
-        for case in ("free", "blocked"):
-            r = fem.solve_unit_from_config(actuator_config, dim, p_top, p_bottom, case, mesh=mesh, stops=stops)
-            # a 3D ray takes minutes per case: say so as each case ends
-            log.info("ray to (%.1f, %.1f) kPa, %s: %s at load factor %.3f, %d steps, %d Newton iterations, %.1f s",
-                     p_top, p_bottom, case, r.reason or "converged", r.load_factor, r.steps, r.newton_iterations,
-                     r.wall_time_s, extra=solved(r.status != 0))
-            paths[case] = r
-        return samples_from_paths(direction, scales, paths["free"], paths["blocked"])
-
-    return solve_ray
-
-
-def write_shard(out: str | Path, *, fea: str, shard: int, sweep_cfg: Mapping[str, Any],
-                actuator_cfg: Mapping[str, Any], config_slice: Any, rule: str = "sweep_shard",
-                solver: Callable | None = None, attrs: Mapping[str, Any] | None = None) -> xr.Dataset:
-    """Solve shard ``shard`` of FE model ``fea`` and write it (atomically) to ``out``.
-
-    ``sweep_cfg`` is the model's ``sweep`` config (p_max_kpa, n_ratios,
-    n_pressures, n_shards); ``solver`` defaults to `make_solver(fea, actuator_cfg)`;
-    ``attrs`` (e.g. the fidelity used and why) go into the file and on to the merged response.
-    """
-    solver = make_solver(fea, actuator_cfg) if solver is None else solver
-    ds = run_shard(solver, shard=int(shard), p_max_kpa=sweep_cfg["p_max_kpa"], n_ratios=sweep_cfg["n_ratios"],
-                   n_pressures=sweep_cfg["n_pressures"], n_shards=sweep_cfg["n_shards"])
-    ds.attrs["fea"] = fea
-    ds.attrs["shard"] = int(shard)
-    mesh = dict(actuator_cfg.get("mesh", {}))
-    ds.attrs["h_mm"] = float(mesh.get(f"h_{fea}_mm", 1.0 if fea == "2d" else 2.0))
-    ds.attrs["contact"] = int(bool(dict(actuator_cfg.get("contact", {})).get("enabled", True)))
-    ds.attrs.update({k: str(v) for k, v in dict(attrs or {}).items()})
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title=f"{fea.upper()} unit pressure sweep, shard {int(shard)}")
-    return ds
-
-
-def write_response(shards: Sequence[str | Path], out: str | Path, *, fea: str, sweep_cfg: Mapping[str, Any],
-                   config_slice: Any, rule: str = "sweep_merge") -> xr.Dataset:
-    """Merge the shard files of FE model ``fea`` into ``response_{fea}.nc`` (CONTRACT.md)."""
-    ds = merge_shards(shards, n_ratios=sweep_cfg["n_ratios"], n_pressures=sweep_cfg["n_pressures"])
-    solved = ~ds["mirrored"].values
-    n_ok = int(np.count_nonzero(ds["converged"].values[solved]))
-    wall = float(ds["wall_time_s"].sum())
-    log.info("%s sweep: %d points (%d solved, %d converged, %d mirrored), %.1f s of solver time",
-             fea, ds.sizes["point"], int(solved.sum()), n_ok, int((~solved).sum()), wall)
-    ds.attrs.update({"fea": fea, "p_max_kpa": float(sweep_cfg["p_max_kpa"]), "n_ratios": int(sweep_cfg["n_ratios"]),
-                     "n_pressures": int(sweep_cfg["n_pressures"]), "solver_wall_time_s": wall})
-    first = shards[0] if isinstance(shards[0], xr.Dataset) else open_result(shards[0])
-    # the mesh the shards were solved on, and why
-    ds.attrs.update({k: v for k, v in first.attrs.items() if k in ("h_mm", "contact") or k.startswith("fidelity")})
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title=f"{fea.upper()} unit response over (P_T, P_B): free angle and blocked moment per unit")
-    return ds

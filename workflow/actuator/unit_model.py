@@ -47,6 +47,8 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from workflow.actuator.surrogates import load_surrogate
+
 __all__ = [
     "UnitModel",
     "load_unit_model",
@@ -57,11 +59,8 @@ __all__ = [
     "pressures_on_ray",
     "iso_angle_pairs",
     "min_norm_pressures",
-    "INVERSE_STATUS",
 ]
 
-#: Status of an inverse query (CF flag_values -> flag_meanings).
-INVERSE_STATUS = {0: "found", 1: "unreachable_within_p_max"}
 
 ArrayFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -71,7 +70,7 @@ class UnitModel:
     """Angle of one unit (deg) as a function of (P_T, P_B) in kPa and end moment in N m.
 
     ``free_angle`` and ``blocked_moment`` are vectorised callables of
-    (p_top_kpa, p_bottom_kpa), e.g. a fitted `workflow.surrogates.Surrogate`'s
+    (p_top_kpa, p_bottom_kpa), e.g. a fitted `workflow.actuator.surrogates.Surrogate`'s
     ``angle_deg`` and ``moment_nm``.
     """
 
@@ -135,8 +134,9 @@ class UnitModel:
     # -- the model --------------------------------------------------------
     def angle_deg(self, p_top_kpa, p_bottom_kpa, m_ext_nm=0.0) -> np.ndarray:
         """Bending angle per unit, deg, under the end moment ``m_ext_nm`` (N m, per unit)."""
-        pt, pb, m = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float),
-                                        np.asarray(m_ext_nm, float))
+        pt, pb, m = np.broadcast_arrays(
+            np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float), np.asarray(m_ext_nm, float)
+        )
         th = self.free_angle_deg(pt, pb)
         u = np.zeros_like(th)  # M / k, deg
         nz = m != 0  # at M = 0 the angle is the free angle, k not needed
@@ -153,8 +153,7 @@ class UnitModel:
 
 
 def load_unit_model(path: str | Path, **kwargs) -> UnitModel:
-    """Unit model on a surrogate saved by `workflow.surrogates.save_surrogate`."""
-    from workflow.surrogates import load_surrogate
+    """Unit model on a surrogate saved by `workflow.actuator.surrogates.save_surrogate`."""
 
     return UnitModel.from_surrogate(load_surrogate(path), **kwargs)
 
@@ -168,7 +167,9 @@ def fit_shape(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg
     (-0.99, 0.99), where the curve stays monotonic between its ends.
     """
     base = replace(model, shape_c=0.0, theta_scale_deg=model.theta_s)
-    pt, pb, m, a = (np.ravel(np.asarray(x, float)) for x in np.broadcast_arrays(p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg))
+    pt, pb, m, a = (
+        np.ravel(np.asarray(x, float)) for x in np.broadcast_arrays(p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg)
+    )
     th = base.free_angle_deg(pt, pb)
     u = m / base.stiffness_nm_per_deg(pt, pb)
     b = u * (th - u) / base.theta_s
@@ -192,7 +193,9 @@ def verify(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg) -
     }
 
 
-def verification_points(model: UnitModel, p_top_kpa, p_bottom_kpa, fractions=(0.25, 0.5, 0.75)) -> dict[str, np.ndarray]:
+def verification_points(
+    model: UnitModel, p_top_kpa, p_bottom_kpa, fractions=(0.25, 0.5, 0.75)
+) -> dict[str, np.ndarray]:
     """End moments at which to check the model by FEA: the given fractions of each pair's blocked moment.
 
     Returns flat arrays ``p_top_kpa``, ``p_bottom_kpa``, ``fraction``, ``m_ext_nm``
@@ -203,8 +206,13 @@ def verification_points(model: UnitModel, p_top_kpa, p_bottom_kpa, fractions=(0.
     PT, F = np.meshgrid(pt, f, indexing="ij")
     PB = np.meshgrid(pb, f, indexing="ij")[0]
     m = F * model.blocked_moment_nm(PT, PB)
-    return {"p_top_kpa": PT.ravel(), "p_bottom_kpa": PB.ravel(), "fraction": F.ravel(), "m_ext_nm": m.ravel(),
-            "predicted_deg": model.angle_deg(PT, PB, m).ravel()}
+    return {
+        "p_top_kpa": PT.ravel(),
+        "p_bottom_kpa": PB.ravel(),
+        "fraction": F.ravel(),
+        "m_ext_nm": m.ravel(),
+        "predicted_deg": model.angle_deg(PT, PB, m).ravel(),
+    }
 
 
 def verification_dataset(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg, status=None):
@@ -215,22 +223,29 @@ def verification_dataset(model: UnitModel, p_top_kpa, p_bottom_kpa, m_ext_nm, an
     """
     import xarray as xr
 
-    pt, pb, m, a = (np.ravel(np.asarray(x, float)) for x in np.broadcast_arrays(p_top_kpa, p_bottom_kpa, m_ext_nm,
-                                                                                 angle_fea_deg))
+    pt, pb, m, a = (
+        np.ravel(np.asarray(x, float)) for x in np.broadcast_arrays(p_top_kpa, p_bottom_kpa, m_ext_nm, angle_fea_deg)
+    )
     st = np.zeros(pt.size, dtype=np.int32) if status is None else np.ravel(np.asarray(status, dtype=np.int32))
     pred = model.angle_deg(pt, pb, m)
     err = np.where(st == 0, pred - a, np.nan)
     ds = xr.Dataset(
         {
-            "m_ext_nm": ("check", m, {"units": "N m", "long_name": "prescribed end moment per unit (resisting, + = flexion)"}),
+            "m_ext_nm": (
+                "check",
+                m,
+                {"units": "N m", "long_name": "prescribed end moment per unit (resisting, + = flexion)"},
+            ),
             "angle_fea_deg": ("check", a, {"units": "degree", "long_name": "FEA angle per unit under the end moment"}),
             "angle_model_deg": ("check", pred, {"units": "degree", "long_name": "unit-model angle per unit"}),
             "error_deg": ("check", err, {"units": "degree", "long_name": "model minus FEA (NaN where FEA failed)"}),
             "fea_status": ("check", st, {"units": "1", "long_name": "FEA status (0 = converged)"}),
         },
-        coords={"check": np.arange(pt.size),
-                "p_top_kpa": ("check", pt, {"units": "kPa", "long_name": "top chamber pressure P_T"}),
-                "p_bottom_kpa": ("check", pb, {"units": "kPa", "long_name": "bottom chamber pressure P_B"})},
+        coords={
+            "check": np.arange(pt.size),
+            "p_top_kpa": ("check", pt, {"units": "kPa", "long_name": "top chamber pressure P_T"}),
+            "p_bottom_kpa": ("check", pb, {"units": "kPa", "long_name": "bottom chamber pressure P_B"}),
+        },
     )
     ok = np.isfinite(err)
     ds.attrs["max_abs_error_deg"] = float(np.max(np.abs(err[ok]))) if ok.any() else np.nan
@@ -248,8 +263,9 @@ def _ray_points(t, ratio):
     return t * top, t * bot
 
 
-def _first_roots(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], grid: np.ndarray, values: np.ndarray,
-                 xtol: float) -> np.ndarray:
+def _first_roots(
+    fn: Callable[[np.ndarray, np.ndarray], np.ndarray], grid: np.ndarray, values: np.ndarray, xtol: float
+) -> np.ndarray:
     """Per row, the smallest root of fn at the row's first sign change on its grid; NaN if none.
 
     ``grid`` and ``values`` are (rows, n); ``fn(x, rows)`` evaluates the rows'
@@ -284,18 +300,30 @@ def _first_roots(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], grid: np.nd
     return root
 
 
-def pressures_on_ray(model: UnitModel, angle_deg, m_ext_nm, ratio, *, p_max_kpa: float | None = None,
-                     n_grid: int = 61, xtol_kpa: float = 1e-3) -> dict[str, np.ndarray]:
+def pressures_on_ray(
+    model: UnitModel,
+    angle_deg,
+    m_ext_nm,
+    ratio,
+    *,
+    p_max_kpa: float | None = None,
+    n_grid: int = 61,
+    xtol_kpa: float = 1e-3,
+) -> dict[str, np.ndarray]:
     """Lowest pressures on the ray P_B/P_T = ``ratio`` giving ``angle_deg`` under ``m_ext_nm``.
 
     ``ratio`` in [0, inf] (inf = bottom chamber only); the ray's larger
     pressure runs over 0..p_max.  Broadcasts its arguments; returns
     ``p_top_kpa``, ``p_bottom_kpa`` (NaN if unreachable) and ``status``
-    (`INVERSE_STATUS`).
+    (`UNIT_INVERSE_STATUS`).
     """
     p_max = model.p_max_kpa if p_max_kpa is None else p_max_kpa
-    a, m, r = (x.ravel() for x in np.broadcast_arrays(np.asarray(angle_deg, float), np.asarray(m_ext_nm, float),
-                                                       np.asarray(ratio, float)))
+    a, m, r = (
+        x.ravel()
+        for x in np.broadcast_arrays(
+            np.asarray(angle_deg, float), np.asarray(m_ext_nm, float), np.asarray(ratio, float)
+        )
+    )
     shape = np.broadcast_shapes(np.shape(angle_deg), np.shape(m_ext_nm), np.shape(ratio))
     t = np.broadcast_to(np.linspace(0.0, p_max, n_grid), (a.size, n_grid))
     pt_grid, pb_grid = _ray_points(t, r[:, None])
@@ -314,8 +342,9 @@ def pressures_on_ray(model: UnitModel, angle_deg, m_ext_nm, ratio, *, p_max_kpa:
     }
 
 
-def _iso(model: UnitModel, angle_deg: float, m_ext_nm: float, p_max: float, phi: np.ndarray, n_grid: int,
-         xtol_kpa: float) -> np.ndarray:
+def _iso(
+    model: UnitModel, angle_deg: float, m_ext_nm: float, p_max: float, phi: np.ndarray, n_grid: int, xtol_kpa: float
+) -> np.ndarray:
     """First crossing radius rho (kPa) on each direction phi (rad); NaN where none inside the square."""
     frac = np.linspace(0.0, 1.0, n_grid)
     edge = p_max / np.maximum(np.cos(phi), np.sin(phi))  # rho at the edge of [0, p_max]^2
@@ -329,8 +358,16 @@ def _iso(model: UnitModel, angle_deg: float, m_ext_nm: float, p_max: float, phi:
     return _first_roots(fn, rho, vals, xtol_kpa)
 
 
-def iso_angle_pairs(model: UnitModel, angle_deg: float, m_ext_nm: float = 0.0, *, p_max_kpa: float | None = None,
-                    n_directions: int = 91, n_grid: int = 61, xtol_kpa: float = 1e-3) -> dict[str, np.ndarray]:
+def iso_angle_pairs(
+    model: UnitModel,
+    angle_deg: float,
+    m_ext_nm: float = 0.0,
+    *,
+    p_max_kpa: float | None = None,
+    n_directions: int = 91,
+    n_grid: int = 61,
+    xtol_kpa: float = 1e-3,
+) -> dict[str, np.ndarray]:
     """The (P_T, P_B) pairs giving ``angle_deg`` under ``m_ext_nm``: the first crossing on each
     direction phi in [0, 90] deg (P_T = rho cos phi, P_B = rho sin phi) inside the square [0, p_max]^2.
 
@@ -340,25 +377,44 @@ def iso_angle_pairs(model: UnitModel, angle_deg: float, m_ext_nm: float = 0.0, *
     p_max = model.p_max_kpa if p_max_kpa is None else p_max_kpa
     phi = np.linspace(0.0, np.pi / 2, n_directions)
     root = _iso(model, float(angle_deg), float(m_ext_nm), p_max, phi, n_grid, xtol_kpa)
-    return {"phi_deg": np.degrees(phi), "p_top_kpa": root * np.cos(phi), "p_bottom_kpa": root * np.sin(phi),
-            "norm_kpa": root}
+    return {
+        "phi_deg": np.degrees(phi),
+        "p_top_kpa": root * np.cos(phi),
+        "p_bottom_kpa": root * np.sin(phi),
+        "norm_kpa": root,
+    }
 
 
-def min_norm_pressures(model: UnitModel, angle_deg, m_ext_nm=0.0, *, p_max_kpa: float | None = None,
-                       n_directions: int = 91, n_grid: int = 61, xtol_kpa: float = 1e-3) -> dict[str, np.ndarray]:
+def min_norm_pressures(
+    model: UnitModel,
+    angle_deg,
+    m_ext_nm=0.0,
+    *,
+    p_max_kpa: float | None = None,
+    n_directions: int = 91,
+    n_grid: int = 61,
+    xtol_kpa: float = 1e-3,
+) -> dict[str, np.ndarray]:
     """The (P_T, P_B) of least sqrt(P_T^2 + P_B^2) giving ``angle_deg`` under ``m_ext_nm``.
 
     Scans `iso_angle_pairs`, then refines the best direction with a bounded
     scalar search between its neighbours.  Broadcasts over ``angle_deg`` and
     ``m_ext_nm``; returns ``p_top_kpa``, ``p_bottom_kpa`` (NaN if unreachable)
-    and ``status`` (`INVERSE_STATUS`).
+    and ``status`` (`UNIT_INVERSE_STATUS`).
     """
     p_max = model.p_max_kpa if p_max_kpa is None else p_max_kpa
     a, m = np.broadcast_arrays(np.asarray(angle_deg, float), np.asarray(m_ext_nm, float))
     pt_out, pb_out = np.full(a.size, np.nan), np.full(a.size, np.nan)
     for i in range(a.size):
-        iso = iso_angle_pairs(model, float(a.flat[i]), float(m.flat[i]), p_max_kpa=p_max,
-                              n_directions=n_directions, n_grid=n_grid, xtol_kpa=xtol_kpa)
+        iso = iso_angle_pairs(
+            model,
+            float(a.flat[i]),
+            float(m.flat[i]),
+            p_max_kpa=p_max,
+            n_directions=n_directions,
+            n_grid=n_grid,
+            xtol_kpa=xtol_kpa,
+        )
         norm = iso["norm_kpa"]
         if np.all(np.isnan(norm)):
             continue
@@ -367,6 +423,7 @@ def min_norm_pressures(model: UnitModel, angle_deg, m_ext_nm=0.0, *, p_max_kpa: 
         lo = iso["phi_deg"][max(j - 1, 0)]
         hi = iso["phi_deg"][min(j + 1, norm.size - 1)]
         if hi > lo and norm[j] > 0:
+
             def f(ph_deg, i=i):
                 r = _iso(model, float(a.flat[i]), float(m.flat[i]), p_max, np.radians([ph_deg]), n_grid, xtol_kpa)
                 return r[0] if np.isfinite(r[0]) else np.inf
@@ -376,5 +433,8 @@ def min_norm_pressures(model: UnitModel, angle_deg, m_ext_nm=0.0, *, p_max_kpa: 
                 best = (res.fun, res.x)
         pt_out[i] = best[0] * np.cos(np.radians(best[1]))
         pb_out[i] = best[0] * np.sin(np.radians(best[1]))
-    return {"p_top_kpa": pt_out.reshape(a.shape), "p_bottom_kpa": pb_out.reshape(a.shape),
-            "status": np.where(np.isnan(pt_out), 1, 0).reshape(a.shape)}
+    return {
+        "p_top_kpa": pt_out.reshape(a.shape),
+        "p_bottom_kpa": pb_out.reshape(a.shape),
+        "status": np.where(np.isnan(pt_out), 1, 0).reshape(a.shape),
+    }

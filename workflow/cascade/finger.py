@@ -23,6 +23,8 @@ continued linearly outside the samples.
 
 Units: lengths in m inside the model (mm at the interfaces named ``*_mm``),
 masses kg, moments N m, angles deg at the interfaces and rad inside energies.
+
+Over 400 lines: the finger's geometry, masses, joint springs and gravity use one frame and one set of segment definitions; the FEA check builds its mesh from the same ones.
 """
 
 from __future__ import annotations
@@ -36,9 +38,9 @@ import pandas as pd
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import root
 
+from workflow.common.constants import JOINTS, SEGMENTS
+
 __all__ = [
-    "JOINTS",
-    "SEGMENTS",
     "DIMENSIONS",
     "G_STANDARD",
     "Monotone1D",
@@ -52,8 +54,6 @@ __all__ = [
     "springs_from_loads",
 ]
 
-JOINTS = ("MCP", "PIP", "DIP")
-SEGMENTS = ("PP", "MP", "DP")
 DIMENSIONS = {"depth": "D", "length": "L", "breadth": "B"}
 G_STANDARD = 9.81  # m/s^2, the paper's value (section 3.2)
 
@@ -137,8 +137,9 @@ class JointSpring:
     curve: Monotone1D
 
     @classmethod
-    def from_points(cls, angles_deg: Sequence[float], moments_nm: Sequence[float],
-                    add_origin: bool = True) -> "JointSpring":
+    def from_points(
+        cls, angles_deg: Sequence[float], moments_nm: Sequence[float], add_origin: bool = True
+    ) -> "JointSpring":
         """Spring through sampled (angle, moment) points, plus (0, 0) by default.
 
         Raises ``ValueError`` if the points are not monotone (non-decreasing)
@@ -364,8 +365,15 @@ def build_finger(
     xj = np.concatenate([[0.0], np.cumsum(L)])  # MCP, PIP, DIP, tip (mm)
     # Breadth knots (mm): joints and segment middles, the patient's B3 codes.
     b_knots_s = [xj[0], xj[0] + L[0] / 2, xj[1], xj[1] + L[1] / 2, xj[2], xj[2] + L[2] / 2, xj[3]]
-    b_knots = [dims_mm["B3PP"], dims_mm["B3PP"], dims_mm["B3PIP"], dims_mm["B3MP"],
-               dims_mm["B3DIP"], dims_mm["B3DP"], dims_mm["B3DP"]]
+    b_knots = [
+        dims_mm["B3PP"],
+        dims_mm["B3PP"],
+        dims_mm["B3PIP"],
+        dims_mm["B3MP"],
+        dims_mm["B3DIP"],
+        dims_mm["B3DP"],
+        dims_mm["B3DP"],
+    ]
 
     path = Path(section_points) if section_points else None
     prof = _read_section_profile(path) if path is not None and path.exists() else None
@@ -406,8 +414,16 @@ def build_finger(
         mass = float(dm.sum())
         x_com = float((dm * s).sum() / mass)
         y_com = float((dm * (dorsal_y - d_o / 2)).sum() / mass)  # section centroid below the dorsal line
-        segments.append(Segment(name, L[k] * 1e-3, mass, (x_com * 1e-3, y_com * 1e-3),
-                                float(seg_depth[k]) * 1e-3, float(np.mean(b)) * 1e-3))
+        segments.append(
+            Segment(
+                name,
+                L[k] * 1e-3,
+                mass,
+                (x_com * 1e-3, y_com * 1e-3),
+                float(seg_depth[k]) * 1e-3,
+                float(np.mean(b)) * 1e-3,
+            )
+        )
     return Finger(
         segments=tuple(segments),
         springs=tuple(springs),
@@ -438,6 +454,7 @@ def gravity_droop_deg(finger: Finger, x0: Sequence[float] | None = None) -> tupl
     Solves spring(theta_j) = gravity moment about j for all three joints
     (``scipy.optimize.root``).  Returns the angles and whether it converged.
     """
+
     def resid(th):
         return np.array([sp.moment_nm(t) for sp, t in zip(finger.springs, th)]) - gravity_moments_nm(finger, th)
 

@@ -6,15 +6,17 @@ from pathlib import Path
 from typing import Sequence
 
 import matplotlib
+import xarray as xr
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from workflow.cascade import GROUPS, CascadeModel, Plan  # noqa: E402
-from workflow.finger import JOINTS  # noqa: E402
+from workflow.cascade.finger import JOINTS  # noqa: E402
+from workflow.cascade.model import GROUPS, CascadeModel  # noqa: E402
+from workflow.cascade.planning import Plan
 
-__all__ = ["plot_poses"]
+__all__ = ["plot_poses", "plot_validation"]
 
 _GROUP_COLOURS = dict(zip(GROUPS, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
 
@@ -45,16 +47,26 @@ def plot_poses(model: CascadeModel, plans: Sequence[Plan], out: str | Path, titl
         for g, name in enumerate(GROUPS):
             idx = np.flatnonzero(model.unit_group == g) + 1
             seg = nodes[np.r_[idx[0] - 1, idx]]
-            ax.plot(seg[:, 0], seg[:, 1], "-o", ms=2.5, lw=2.0, color=_GROUP_COLOURS[name],
-                    label=f"LA_{name}" if plan is plans[0] else None)
+            ax.plot(
+                seg[:, 0],
+                seg[:, 1],
+                "-o",
+                ms=2.5,
+                lw=2.0,
+                color=_GROUP_COLOURS[name],
+                label=f"LA_{name}" if plan is plans[0] else None,
+            )
         joints, _ = f.joint_positions(eq.joint_angles_deg)
         ax.plot(joints[:, 0] * 1e3, joints[:, 1] * 1e3, "k.", ms=4)
         p = plan.pressures_kpa.reshape(4, 2)
         txt = "\n".join(f"{g}: {p[i, 0]:.0f}/{p[i, 1]:.0f} kPa" for i, g in enumerate(GROUPS))
         ang = ", ".join(f"{j} {a:.0f}({t:.0f})" for j, a, t in zip(JOINTS, eq.joint_angles_deg, plan.target_deg))
         ax.text(0.02, 0.02, txt, transform=ax.transAxes, fontsize=6.5, va="bottom", family="monospace")
-        ax.set_title(f"{plan.exercise}: {'reached' if plan.achieved else 'not reached'}\n{ang} deg",
-                     fontsize=8, color="k" if plan.achieved else "firebrick")
+        ax.set_title(
+            f"{plan.exercise}: {'reached' if plan.achieved else 'not reached'}\n{ang} deg",
+            fontsize=8,
+            color="k" if plan.achieved else "firebrick",
+        )
         ax.set_aspect("equal")
         ax.set_xlim(model.base_x_m * 1e3 - 8, f.tip_x_m * 1e3 + 20)
         ax.set_ylim(-f.tip_x_m * 1e3 - 10, f.dorsal_y_m * 1e3 + 35)
@@ -62,9 +74,47 @@ def plot_poses(model: CascadeModel, plans: Sequence[Plan], out: str | Path, titl
         ax.set_xlabel("x (mm)", fontsize=7)
     axes[0, 0].set_ylabel("y, dorsal (mm)", fontsize=7)
     fig.legend(loc="upper right", fontsize=7, ncol=4)
-    fig.suptitle(f"Planned poses (reduced-order cascade){': ' + title if title else ''}; "
-                 "dashed: target, x(y): predicted(target)", fontsize=8, y=0.995)
+    fig.suptitle(
+        f"Planned poses (reduced-order cascade){': ' + title if title else ''}; "
+        "dashed: target, x(y): predicted(target)",
+        fontsize=8,
+        y=0.995,
+    )
     fig.tight_layout(rect=(0, 0, 1, 0.93))
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=130)
+    plt.close(fig)
+
+
+def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
+    """Our pressures beside the paper's, one panel per exercise."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ex = list(ds["exercise"].values)
+    fig, axes = plt.subplots(1, len(ex), figsize=(3.0 * len(ex), 3.0), sharey=True, squeeze=False)
+    x = np.arange(8)
+    w = 0.8 / (1 + ds.sizes["table"])
+    per_table = "table" in ds["ours"].dims
+    w = 0.8 / (2 * ds.sizes["table"]) if per_table else w
+    for ax, e in zip(axes[0], ex):
+        if not per_table:
+            ax.bar(x - 0.4 + w / 2, ds["ours"].sel(exercise=e), w, label="ours")
+        for k, r in enumerate(ds["table"].values):
+            if per_table:
+                ax.bar(x - 0.4 + w * (2 * k + 0.5), ds["ours"].sel(table=r, exercise=e), w, label=f"ours vs {r}")
+                ax.bar(x - 0.4 + w * (2 * k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
+            else:
+                ax.bar(x - 0.4 + w * (k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
+        reached = bool(ds["ours_achieved"].sel(exercise=e))
+        ax.set_title(f"{e} ({'reached' if reached else 'not reached'} by ours)", fontsize=8)
+        ax.set_xticks(x, [p[2:] for p in ds["pressure"].values], rotation=90, fontsize=6)
+        ax.tick_params(labelsize=6)
+    axes[0, 0].set_ylabel("pressure (kPa)", fontsize=7)
+    axes[0, 0].legend(fontsize=6)
+    fig.tight_layout()
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=130)
     plt.close(fig)

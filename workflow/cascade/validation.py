@@ -19,10 +19,9 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from workflow.cascade import PRESSURE_NAMES
+from workflow.cascade.model import GROUPS, PRESSURE_NAMES, SPANS
 
-__all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "compare_unit_moments",
-           "write_cascade_validation", "plot_validation"]
+__all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "compare_unit_moments"]
 
 #: Exercises the paper reached, per set.
 PAPER_REACHED: Mapping[str, Sequence[str]] = {
@@ -41,8 +40,12 @@ def read_pressure_table(path: str | Path) -> pd.DataFrame:
     return df[list(PRESSURE_NAMES)].astype(float)
 
 
-def compare_pressures(plan: xr.Dataset, references: Mapping[str, pd.DataFrame],
-                      rel_floor_kpa: float = 10.0, plans: Mapping[str, xr.Dataset] | None = None) -> xr.Dataset:
+def compare_pressures(
+    plan: xr.Dataset,
+    references: Mapping[str, pd.DataFrame],
+    rel_floor_kpa: float = 10.0,
+    plans: Mapping[str, xr.Dataset] | None = None,
+) -> xr.Dataset:
     """Errors of the plan's pressures against each reference table.
 
     ``plan``: a ``cascade_plan.nc`` dataset; ``references``: {name: table},
@@ -70,26 +73,52 @@ def compare_pressures(plan: xr.Dataset, references: Mapping[str, pd.DataFrame],
     paper = np.array([[e in PAPER_REACHED[s] for e in ex] for s in sets])
     # the dummy-finger experiment is compared with the dummy's plan when there is one
     dummy = plans.get("table10")
-    ours_sets = np.array([np.asarray(dummy["achieved"].values).astype(bool)
-                          if (dummy is not None and "dummy" in s) else achieved for s in sets])
+    ours_sets = np.array(
+        [
+            np.asarray(dummy["achieved"].values).astype(bool) if (dummy is not None and "dummy" in s) else achieved
+            for s in sets
+        ]
+    )
     agree = paper == ours_sets
     ours_dims = ("exercise", "pressure") if not plans else ("table", "exercise", "pressure")
     patients = [str(pl.attrs.get("patient", "")) for pl in compared]
     ds = xr.Dataset(
         {
-            "ours": (ours_dims, ours, {"units": "kPa", "long_name": "our planned pressure",
-                                       "patient_per_table": ", ".join(f"{n}: {p}" for n, p in zip(names, patients))}),
+            "ours": (
+                ours_dims,
+                ours,
+                {
+                    "units": "kPa",
+                    "long_name": "our planned pressure",
+                    "patient_per_table": ", ".join(f"{n}: {p}" for n, p in zip(names, patients)),
+                },
+            ),
             "reference": (("table", "exercise", "pressure"), ref, {"units": "kPa", "long_name": "paper's pressure"}),
-            "abs_error": (("table", "exercise", "pressure"), abs_err,
-                          {"units": "kPa", "long_name": "|ours - reference|"}),
-            "rel_error": (("table", "exercise", "pressure"), rel,
-                          {"units": "1", "long_name": f"|ours - reference| / reference (NaN where reference < {rel_floor_kpa:g} kPa)"}),
-            "mean_abs_error": (("table",), np.nanmean(abs_err.reshape(len(names), -1), axis=1),
-                               {"units": "kPa", "long_name": "mean absolute error over the table's cells"}),
+            "abs_error": (
+                ("table", "exercise", "pressure"),
+                abs_err,
+                {"units": "kPa", "long_name": "|ours - reference|"},
+            ),
+            "rel_error": (
+                ("table", "exercise", "pressure"),
+                rel,
+                {
+                    "units": "1",
+                    "long_name": f"|ours - reference| / reference (NaN where reference < {rel_floor_kpa:g} kPa)",
+                },
+            ),
+            "mean_abs_error": (
+                ("table",),
+                np.nanmean(abs_err.reshape(len(names), -1), axis=1),
+                {"units": "kPa", "long_name": "mean absolute error over the table's cells"},
+            ),
             "ours_achieved": (("exercise",), achieved, {"long_name": "exercise reached by our plan"}),
             "paper_reached": (("paper_set", "exercise"), paper, {"long_name": "exercise reached in the paper's set"}),
-            "reached_agreement": (("paper_set",), agree.mean(axis=1),
-                                  {"units": "1", "long_name": "share of exercises where ours and the paper's set agree"}),
+            "reached_agreement": (
+                ("paper_set",),
+                agree.mean(axis=1),
+                {"units": "1", "long_name": "share of exercises where ours and the paper's set agree"},
+            ),
         },
         coords={"table": names, "exercise": ex, "pressure": list(PRESSURE_NAMES), "paper_set": sets},
     )
@@ -104,81 +133,31 @@ def compare_unit_moments(plan: xr.Dataset, table07: str | Path) -> xr.Dataset:
     and MCP: MCP).  The paper's came from tip-force measurements divided over
     eight chambers, so only signs and ordering compare.
     """
-    from workflow.cascade import GROUPS, SPANS
 
     tab = pd.read_csv(table07).set_index("exercise")
     ex = [str(e) for e in plan["exercise"].values]
     joint_of = {g: j for j, gs in SPANS.items() for g in gs}
-    ours = np.array([[float(plan["required_moment_nm"].sel(exercise=e, joint=joint_of[g])) for g in GROUPS]
-                     for e in ex])
+    ours = np.array(
+        [[float(plan["required_moment_nm"].sel(exercise=e, joint=joint_of[g])) for g in GROUPS] for e in ex]
+    )
     ref = np.array([[float(tab.loc[e, f"M_{g}_Nm"]) if e in tab.index else np.nan for g in GROUPS] for e in ex])
     return xr.Dataset(
         {
-            "unit_moment_ours_nm": (("exercise", "group"), ours,
-                                    {"units": "N m", "long_name": "our per-unit moment holding the target pose"}),
-            "unit_moment_table07_nm": (("exercise", "group"), ref,
-                                       {"units": "N m", "long_name": "paper's target moment per unit (Table 7)"}),
-            "unit_moment_sign_agrees": (("exercise", "group"), np.sign(ours) == np.sign(ref),
-                                        {"long_name": "ours and Table 7 have the same sign"}),
+            "unit_moment_ours_nm": (
+                ("exercise", "group"),
+                ours,
+                {"units": "N m", "long_name": "our per-unit moment holding the target pose"},
+            ),
+            "unit_moment_table07_nm": (
+                ("exercise", "group"),
+                ref,
+                {"units": "N m", "long_name": "paper's target moment per unit (Table 7)"},
+            ),
+            "unit_moment_sign_agrees": (
+                ("exercise", "group"),
+                np.sign(ours) == np.sign(ref),
+                {"long_name": "ours and Table 7 have the same sign"},
+            ),
         },
         coords={"exercise": ex, "group": list(GROUPS)},
     )
-
-
-def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
-    """Our pressures beside the paper's, one panel per exercise."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ex = list(ds["exercise"].values)
-    fig, axes = plt.subplots(1, len(ex), figsize=(3.0 * len(ex), 3.0), sharey=True, squeeze=False)
-    x = np.arange(8)
-    w = 0.8 / (1 + ds.sizes["table"])
-    per_table = "table" in ds["ours"].dims
-    w = 0.8 / (2 * ds.sizes["table"]) if per_table else w
-    for ax, e in zip(axes[0], ex):
-        if not per_table:
-            ax.bar(x - 0.4 + w / 2, ds["ours"].sel(exercise=e), w, label="ours")
-        for k, r in enumerate(ds["table"].values):
-            if per_table:
-                ax.bar(x - 0.4 + w * (2 * k + 0.5), ds["ours"].sel(table=r, exercise=e), w, label=f"ours vs {r}")
-                ax.bar(x - 0.4 + w * (2 * k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
-            else:
-                ax.bar(x - 0.4 + w * (k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
-        reached = bool(ds["ours_achieved"].sel(exercise=e))
-        ax.set_title(f"{e} ({'reached' if reached else 'not reached'} by ours)", fontsize=8)
-        ax.set_xticks(x, [p[2:] for p in ds["pressure"].values], rotation=90, fontsize=6)
-        ax.tick_params(labelsize=6)
-    axes[0, 0].set_ylabel("pressure (kPa)", fontsize=7)
-    axes[0, 0].legend(fontsize=6)
-    fig.tight_layout()
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=130)
-    plt.close(fig)
-
-
-def write_cascade_validation(plan_nc: str | Path, tables: Mapping[str, str | Path], out_nc: str | Path, *,
-                             config_slice, rule: str = "validate_cascade", plot: str | Path | None = None,
-                             rel_floor_kpa: float = 10.0, table07: str | Path | None = None,
-                             dummy_plan_nc: str | Path | None = None) -> xr.Dataset:
-    """Read the mean finger's plan and the paper's tables, write ``results/validation/cascade.nc``.
-
-    ``tables``: {name: pressure table CSV} (Tables 8 and 10); ``table07``: the
-    unit-moment targets, compared when given; ``dummy_plan_nc``: the PLA
-    dummy finger's plan, compared with ``table10`` (the paper's experiment).
-    """
-    from workflow.provenance import open_result, write_dataset
-
-    plan = open_result(plan_nc)
-    plans = {"table10": open_result(dummy_plan_nc)} if dummy_plan_nc and "table10" in tables else None
-    ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa, plans)
-    if table07 is not None:
-        ds = ds.merge(compare_unit_moments(plan, table07))
-    ds.attrs["patient"] = str(plan.attrs.get("patient", ""))
-    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
-                  title="Planned pressures against the paper's Tables 8 and 10")
-    if plot:
-        plot_validation(ds, plot)
-    return ds

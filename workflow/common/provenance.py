@@ -37,16 +37,30 @@ __all__ = [
     "provenance_attrs",
     "write_dataset",
     "code_files",
+    "TRACKED_PACKAGES",
+    "RECOVER",
+    "CONTRACT_VARIABLES",
+    "corrupt_input",
 ]
 
 #: Distributions whose versions are recorded in every dataset.
 TRACKED_PACKAGES = (
-    "numpy", "scipy", "pandas", "xarray", "netCDF4", "statsmodels",
-    "scikit-learn", "scikit-fem", "meshio", "snakemake", "opensim", "pypardiso",
+    "numpy",
+    "scipy",
+    "pandas",
+    "xarray",
+    "netCDF4",
+    "statsmodels",
+    "scikit-learn",
+    "scikit-fem",
+    "meshio",
+    "snakemake",
+    "opensim",
+    "pypardiso",
     "finger-rehab-workflow",
 )
 
-_REPO_ROOT = Path(__file__).resolve().parents[1]
+_REPO_ROOT = Path(__file__).resolve().parents[2]
 
 #: How to recover from a damaged result: every result is a rule's output.
 RECOVER = "delete it and rerun: Snakemake recomputes it"
@@ -58,13 +72,38 @@ CONTRACT_VARIABLES = {
     "*doe/scaling.nc": ("scale",),
     "*musculoskeletal/moments.nc": ("moment_nm",),
     "*musculoskeletal/rsm.nc": ("coef", "term_p_value", "r2", "adj_r2", "p_value", "selected"),
-    "*patients/*/joint_loads.nc": ("x", "passive_moment_nm", "passive_moment_lo_nm", "passive_moment_hi_nm",
-                                   "active_limit_nm", "in_design_range"),
+    "*patients/*/joint_loads.nc": (
+        "x",
+        "passive_moment_nm",
+        "passive_moment_lo_nm",
+        "passive_moment_hi_nm",
+        "active_limit_nm",
+        "in_design_range",
+    ),
     "*actuator/unit_check.nc": ("bending_angle_deg", "bending_moment_nm", "max_penetration_mm", "wall_time_s"),
-    "*actuator/sweep/*/shard*.nc": ("p_top_kpa", "p_bottom_kpa", "bending_angle_deg", "bending_moment_nm", "status",
-                                    "newton_iterations", "wall_time_s", "ray", "ratio", "scale"),
-    "*actuator/response_[23]d.nc": ("p_top_kpa", "p_bottom_kpa", "bending_angle_deg", "bending_moment_nm", "status",
-                                    "converged", "mirrored", "newton_iterations", "wall_time_s"),
+    "*actuator/sweep/*/shard*.nc": (
+        "p_top_kpa",
+        "p_bottom_kpa",
+        "bending_angle_deg",
+        "bending_moment_nm",
+        "status",
+        "newton_iterations",
+        "wall_time_s",
+        "ray",
+        "ratio",
+        "scale",
+    ),
+    "*actuator/response_[23]d.nc": (
+        "p_top_kpa",
+        "p_bottom_kpa",
+        "bending_angle_deg",
+        "bending_moment_nm",
+        "status",
+        "converged",
+        "mirrored",
+        "newton_iterations",
+        "wall_time_s",
+    ),
     "*actuator/surrogate_cv.nc": ("r2", "mae", "rmse", "fit_time_s", "predict_time_s"),
     "*actuator/mapping_2d3d.nc": ("pressure_3d_kpa", "pressure_2d_kpa"),
     "*patients/*/cascade_plan.nc": ("pressure_kpa", "target_angle_deg", "predicted_angle_deg", "achieved", "reason"),
@@ -100,13 +139,17 @@ def open_result(path: str | os.PathLike, required_vars: tuple[str, ...] | None =
         ds = xr.load_dataset(path)
     except Exception as err:  # netCDF4/HDF5 raise OSError, RuntimeError or ValueError for a damaged file
         detail = str(err).strip().splitlines()[0].split(". ")[0][:160] if str(err).strip() else type(err).__name__
-        raise corrupt_input(path, f"not a readable netCDF file (truncated or not written by this workflow: {detail})") \
-            from err
+        raise corrupt_input(
+            path, f"not a readable netCDF file (truncated or not written by this workflow: {detail})"
+        ) from err
     need = contract_variables(path) if required_vars is None else tuple(required_vars)
     missing = [v for v in need if v not in ds.variables]
     if missing:
-        raise corrupt_input(path, f"lacks the variable(s) {', '.join(missing)} this workflow writes there "
-                                  "(written by another version, or not by it)")
+        raise corrupt_input(
+            path,
+            f"lacks the variable(s) {', '.join(missing)} this workflow writes there "
+            "(written by another version, or not by it)",
+        )
     return ds
 
 
@@ -139,7 +182,10 @@ def git_commit() -> str:
             return "unknown"
         dirty = subprocess.run(
             ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=_REPO_ROOT, capture_output=True, text=True, timeout=10,
+            cwd=_REPO_ROOT,
+            capture_output=True,
+            text=True,
+            timeout=10,
         ).stdout.strip()
         return sha + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
@@ -245,7 +291,7 @@ def _imported_modules(path: Path, dotted: str) -> set[str]:
             continue
         for name in names:
             if name == "workflow" or name.startswith("workflow."):
-                out.add(name[len("workflow."):] if name != "workflow" else "")
+                out.add(name[len("workflow.") :] if name != "workflow" else "")
     return out
 
 
@@ -260,9 +306,9 @@ def code_files(*modules: str) -> list[str]:
     packages those live in.  So the unit-model rules that use ``fem`` do not
     rerun when only the finger-actuator model (``fem._coupled``) changes.
     """
-    pkg = Path(__file__).resolve().parent
+    pkg = Path(__file__).resolve().parents[1]
     seen: dict[str, Path] = {}
-    todo = ["provenance", *modules]
+    todo = ["common.provenance", *modules]
     while todo:
         dotted = todo.pop()
         if dotted in seen:
@@ -297,5 +343,8 @@ def load_joblib(path: str | os.PathLike) -> Any:
             warnings.simplefilter("ignore")  # library version warnings: the caller checks the versions it records
             return joblib.load(path)
     except Exception as err:  # pickle raises anything from EOFError to ModuleNotFoundError
-        raise corrupt_input(path, f"not a readable joblib file (truncated, or from another version: "
-                                  f"{type(err).__name__}: {str(err).strip()[:120]})") from err
+        raise corrupt_input(
+            path,
+            f"not a readable joblib file (truncated, or from another version: "
+            f"{type(err).__name__}: {str(err).strip()[:120]})",
+        ) from err

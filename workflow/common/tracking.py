@@ -8,8 +8,8 @@ store under ``results/tracking``), so a team can point it at its own server.
 
 Compare two runs side by side::
 
-    python -m workflow.tracking compare RUN_A RUN_B [--uri sqlite:///results/tracking/mlflow.db]
-    python -m workflow.tracking list
+    python -m workflow.common.tracking compare RUN_A RUN_B [--uri sqlite:///results/tracking/mlflow.db]
+    python -m workflow.common.tracking list
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
-from .provenance import config_sha256, git_commit, open_result, package_versions
+from workflow.common.provenance import config_sha256, git_commit, open_result, package_versions
 
-__all__ = ["headline_metrics", "rule_times", "flatten", "log_run", "compare_runs", "main"]
+__all__ = ["headline_metrics", "rule_times", "flatten", "log_run", "compare_runs", "main", "DEFAULT_URI", "COLLECTORS"]
 
 DEFAULT_URI = "sqlite:///results/tracking/mlflow.db"
 
@@ -141,7 +141,9 @@ def rule_times(bench_dir: str | Path) -> dict[str, float]:
         with f.open() as fh:
             rows = list(csv.DictReader(fh, delimiter="\t"))
         if rows:
-            out[f"time_{f.relative_to(bench_dir).with_suffix('').as_posix().replace('/', '.')}_s"] = float(rows[-1]["s"])
+            out[f"time_{f.relative_to(bench_dir).with_suffix('').as_posix().replace('/', '.')}_s"] = float(
+                rows[-1]["s"]
+            )
     return out
 
 
@@ -177,12 +179,14 @@ def _log_run(uri, experiment, patient, params, metrics, artifacts, config_slice)
         mlflow.create_experiment(experiment, artifact_location=art.resolve().as_uri() if art else None)
     mlflow.set_experiment(experiment)
     with mlflow.start_run(run_name=f"{patient}") as run:
-        mlflow.set_tags({
-            "patient": patient,
-            "config_sha256": config_sha256(config_slice),
-            "git_commit": git_commit(),
-            "package_versions": json.dumps(package_versions(), sort_keys=True),
-        })
+        mlflow.set_tags(
+            {
+                "patient": patient,
+                "config_sha256": config_sha256(config_slice),
+                "git_commit": git_commit(),
+                "package_versions": json.dumps(package_versions(), sort_keys=True),
+            }
+        )
         flat = {k: str(v)[:500] for k, v in flatten(params).items()}
         mlflow.log_params(flat)
         mlflow.log_metrics(dict(metrics))
@@ -212,7 +216,7 @@ def compare_runs(uri: str, run_a: str, run_b: str):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m workflow.tracking", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m workflow.common.tracking", description=__doc__.split("\n\n")[0])
     ap.add_argument("--uri", default=DEFAULT_URI, help="MLflow tracking URI (default: %(default)s)")
     sub = ap.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("compare", help="two runs side by side")
@@ -226,7 +230,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd == "list":
         mlflow.set_tracking_uri(args.uri)
         runs = mlflow.search_runs(search_all_experiments=True)
-        keep = [c for c in ("run_id", "tags.mlflow.runName", "start_time", "tags.git_commit", "tags.config_sha256") if c in runs]
+        keep = [
+            c
+            for c in ("run_id", "tags.mlflow.runName", "start_time", "tags.git_commit", "tags.config_sha256")
+            if c in runs
+        ]
         print(runs[keep].to_string(index=False))
         return 0
     df = compare_runs(args.uri, args.run_a, args.run_b)

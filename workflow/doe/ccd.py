@@ -40,8 +40,21 @@ AXES = ("X", "Y", "Z")
 
 #: Row order of Tables 3-4 and of the authors' joint-moment export (its ``num``).
 PAPER_RUN_ORDER = (
-    "D+L+B-", "D+L+B+", "D-L+B-", "Lm", "D+L-B+", "D+L-B-", "Dm", "Bm",
-    "Original", "BM", "D-L+B+", "DM", "D-L-B+", "D-L-B-", "LM",
+    "D+L+B-",
+    "D+L+B+",
+    "D-L+B-",
+    "Lm",
+    "D+L-B+",
+    "D+L-B-",
+    "Dm",
+    "Bm",
+    "Original",
+    "BM",
+    "D-L+B+",
+    "DM",
+    "D-L-B+",
+    "D-L-B-",
+    "LM",
 )
 
 

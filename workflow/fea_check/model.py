@@ -6,7 +6,7 @@ the plan uses (:func:`workflow.cascade.patient_finger`, the plan's
 
 * **Finger section**: the authors' section points (outline and bone, dorsal
   and palmar) mapped onto the patient's segments and depth-scaled exactly as
-  :func:`workflow.finger.build_finger` does for the masses; the bone's centre
+  :func:`workflow.cascade.finger.build_finger` does for the masses; the bone's centre
   line runs through the joint centres (``Finger.joints_ref``).  The distal
   phalanx closes to zero depth at the tip: its body ends where its depth drops
   to ``tip_min_depth_ratio`` of D3DP (the last ~7 % of the pad, a sliver
@@ -38,11 +38,11 @@ from typing import Any, Mapping
 import numpy as np
 
 from workflow import fem
-from workflow.cascade import GROUPS, unit_section
-from workflow.finger import JOINTS, Finger, _read_section_profile
-from workflow.fem._coupled import CoupledSetup, cell_areas, couple_meshes, nodal_body_force
-from workflow.fem._finger2d import BONE, FLESH, SegmentProfile, build_finger_mesh
+from workflow.cascade.finger import JOINTS, Finger, _read_section_profile
+from workflow.cascade.model import GROUPS, unit_section
 from workflow.fem._mesh import build_actuator_mesh
+from workflow.fem.coupled import CoupledSetup, cell_areas, couple_meshes, nodal_body_force
+from workflow.fem.finger2d import BONE, FLESH, SegmentProfile, build_finger_mesh
 
 __all__ = ["DEFAULT_FEA_CHECK", "lame", "finger_profiles", "spring_callables", "PatientFEA", "build_patient_fea"]
 
@@ -64,8 +64,13 @@ def lame(e_mpa: float, nu: float) -> tuple[float, float]:
     return e_mpa / (2 * (1 + nu)), e_mpa * nu / ((1 + nu) * (1 - 2 * nu))
 
 
-def finger_profiles(finger: Finger, section_points: str, reference_dims_mm: Mapping[str, float],
-                    tip_min_depth_ratio: float = 0.35, n_stations: int = 41) -> list[SegmentProfile]:
+def finger_profiles(
+    finger: Finger,
+    section_points: str,
+    reference_dims_mm: Mapping[str, float],
+    tip_min_depth_ratio: float = 0.35,
+    n_stations: int = 41,
+) -> list[SegmentProfile]:
     """The three segments' sections (mm, finger frame: x from the MCP centre, y dorsal)."""
     prof = _read_section_profile(section_points)
     dims = finger.dimensions_mm
@@ -130,9 +135,15 @@ class PatientFEA:
     notes: str
 
 
-def build_patient_fea(finger: Finger, units_per_group: Mapping[str, int], *, actuator_cfg: Mapping,
-                      cascade_cfg: Mapping, reference_dims_mm: Mapping[str, float],
-                      fea_cfg: Mapping | None = None) -> PatientFEA:
+def build_patient_fea(
+    finger: Finger,
+    units_per_group: Mapping[str, int],
+    *,
+    actuator_cfg: Mapping,
+    cascade_cfg: Mapping,
+    reference_dims_mm: Mapping[str, float],
+    fea_cfg: Mapping | None = None,
+) -> PatientFEA:
     """The coupled FE model of ``finger`` under an actuator of ``units_per_group`` chambers.
 
     ``actuator_cfg``: the config's ``actuator`` section (geometry, material,
@@ -185,13 +196,20 @@ def build_patient_fea(finger: Finger, units_per_group: Mapping[str, int], *, act
     # as the silicone's: eps = factor mu / (1 mm), the same on every finger mesh
     contact["finger_penalty"] = float(fc["finger_penalty_factor"]) * mu_f / 1.0
     setup = CoupledSetup(
-        cm=cm, mat=mat, springs=[spring_callables(s, W) for s in finger.springs],
-        strap_k=float(cascade_cfg["strap_stiffness_n_per_m"]) * 1e-3 / W, gravity=gravity if g > 0 else None,
-        contact=contact, slide_k=float(fc["slide_stiffness_n_per_mm"]),
-        formulation=actuator_cfg.get("formulation", fem.DEFAULT_FORMULATION))
-    notes = (f"plane strain per mm of actuator width W = {W:g} mm; finger weights {np.round([target[k] * W for k in range(3)], 5)} N, "
-             f"actuator {target[-1] * W:.4g} N; strap {setup.strap_k:g} N/mm per mm; flesh mu {mu_f:.4g} MPa; "
-             f"{cm.mesh.p.shape[1] * 2} dofs")
+        cm=cm,
+        mat=mat,
+        springs=[spring_callables(s, W) for s in finger.springs],
+        strap_k=float(cascade_cfg["strap_stiffness_n_per_m"]) * 1e-3 / W,
+        gravity=gravity if g > 0 else None,
+        contact=contact,
+        slide_k=float(fc["slide_stiffness_n_per_mm"]),
+        formulation=actuator_cfg.get("formulation", fem.DEFAULT_FORMULATION),
+    )
+    notes = (
+        f"plane strain per mm of actuator width W = {W:g} mm; finger weights {np.round([target[k] * W for k in range(3)], 5)} N, "
+        f"actuator {target[-1] * W:.4g} N; strap {setup.strap_k:g} N/mm per mm; flesh mu {mu_f:.4g} MPa; "
+        f"{cm.mesh.p.shape[1] * 2} dofs"
+    )
     return PatientFEA(setup=setup, finger=finger, units_per_group=counts, width_mm=W, base_x_mm=base_x, notes=notes)
 
 

@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 
-from workflow.finger import JOINTS, Finger  # noqa: E402
+from workflow.cascade.finger import JOINTS, Finger  # noqa: E402
 
 __all__ = ["plot_fea_poses", "plot_standalone"]
 
@@ -23,12 +23,14 @@ _COLOURS = {0: "#6fa8dc", 1: "k", 2: "#f6b26b", 3: "#999999"}  # silicone, paper
 
 def _cells(ax, p: np.ndarray, t: np.ndarray, material: np.ndarray) -> None:
     polys = p[:, t].transpose(2, 1, 0)  # (ncell, 4, 2)
-    ax.add_collection(PolyCollection(polys, facecolors=[_COLOURS.get(int(m), "c") for m in material],
-                                     edgecolors="none", linewidths=0))
+    ax.add_collection(
+        PolyCollection(polys, facecolors=[_COLOURS.get(int(m), "c") for m in material], edgecolors="none", linewidths=0)
+    )
 
 
-def _pose_panel(ax, mesh_p, mesh_t, material, u, finger: Finger, target, angles, plan, pressures, groups,
-                head: str, ok: bool) -> None:
+def _pose_panel(
+    ax, mesh_p, mesh_t, material, u, finger: Finger, target, angles, plan, pressures, groups, head: str, ok: bool
+) -> None:
     x = mesh_p + np.asarray(u).reshape(-1, 2).T
     _cells(ax, x, mesh_t, material)
     joints, _ = finger.joint_positions(target)
@@ -45,9 +47,17 @@ def _pose_panel(ax, mesh_p, mesh_t, material, u, finger: Finger, target, angles,
     ax.set_xlabel("x (mm)", fontsize=7)
 
 
-def plot_fea_poses(mesh_p: np.ndarray, mesh_t: np.ndarray, material: np.ndarray, states: Sequence[np.ndarray],
-                   ds: xr.Dataset, finger: Finger, out: str | Path, title: str = "",
-                   corrected_states: Sequence[np.ndarray | None] | None = None) -> None:
+def plot_fea_poses(
+    mesh_p: np.ndarray,
+    mesh_t: np.ndarray,
+    material: np.ndarray,
+    states: Sequence[np.ndarray],
+    ds: xr.Dataset,
+    finger: Finger,
+    out: str | Path,
+    title: str = "",
+    corrected_states: Sequence[np.ndarray | None] | None = None,
+) -> None:
     """One panel per exercise: deformed actuator and finger (FEA), target pose of the
     joint chain (dashed), angles reached (target; plan) and the applied pressures.
 
@@ -63,29 +73,62 @@ def plot_fea_poses(mesh_p: np.ndarray, mesh_t: np.ndarray, material: np.ndarray,
         tgt = row["target_angle_deg"].values
         ok = bool(row["achieved"].values)
         conv = "" if bool(row["converged"].values) else f" (stopped at {float(row['load_factor']):.2f})"
-        _pose_panel(axes[0, k], mesh_p, mesh_t, material, u, finger, tgt, row["angle_deg"].values,
-                    row["predicted_angle_deg"].values, row["pressure_kpa"].values, groups,
-                    f"{ex}: {'reached' if ok else 'not reached'}{conv}", ok)
+        _pose_panel(
+            axes[0, k],
+            mesh_p,
+            mesh_t,
+            material,
+            u,
+            finger,
+            tgt,
+            row["angle_deg"].values,
+            row["predicted_angle_deg"].values,
+            row["pressure_kpa"].values,
+            groups,
+            f"{ex}: {'reached' if ok else 'not reached'}{conv}",
+            ok,
+        )
         if rows == 2:
             ax = axes[1, k]
             if corrected_states[k] is None:
                 ax.axis("off")
                 why = textwrap.fill(str(row["correction_reason"].item()), 45)
-                ax.text(0.5, 0.5, f"{ex}: plan kept\n{why}", ha="center", va="center", fontsize=6.5,
-                        transform=ax.transAxes, clip_on=True)
+                ax.text(
+                    0.5,
+                    0.5,
+                    f"{ex}: plan kept\n{why}",
+                    ha="center",
+                    va="center",
+                    fontsize=6.5,
+                    transform=ax.transAxes,
+                    clip_on=True,
+                )
                 continue
             b = int(row["correction_best"])
             ok_c = bool(row["achieved_corrected"].values)
-            _pose_panel(ax, mesh_p, mesh_t, material, corrected_states[k], finger, tgt,
-                        row["corrected_angle_deg"].values, row["iteration_predicted_angle_deg"].isel(iteration=b).values,
-                        row["corrected_pressure_2d_kpa"].values, groups,
-                        f"{ex} corrected ({b} of {int(row['correction_iterations'])}): "
-                        f"{'reached' if ok_c else 'not reached'}", ok_c)
+            _pose_panel(
+                ax,
+                mesh_p,
+                mesh_t,
+                material,
+                corrected_states[k],
+                finger,
+                tgt,
+                row["corrected_angle_deg"].values,
+                row["iteration_predicted_angle_deg"].isel(iteration=b).values,
+                row["corrected_pressure_2d_kpa"].values,
+                groups,
+                f"{ex} corrected ({b} of {int(row['correction_iterations'])}): {'reached' if ok_c else 'not reached'}",
+                ok_c,
+            )
     for r in range(rows):
         axes[r, 0].set_ylabel("y, dorsal (mm)", fontsize=7)
-    fig.suptitle(f"FEA check, 2D plane strain{': ' + title if title else ''}; dashed: target pose, "
-                 "angle(target; plan)" + ("; lower row: after the correction step" if rows == 2 else ""),
-                 fontsize=8, y=0.995)
+    fig.suptitle(
+        f"FEA check, 2D plane strain{': ' + title if title else ''}; dashed: target pose, "
+        "angle(target; plan)" + ("; lower row: after the correction step" if rows == 2 else ""),
+        fontsize=8,
+        y=0.995,
+    )
     fig.tight_layout(rect=(0, 0, 1, 0.95))
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=130)
@@ -104,8 +147,13 @@ def plot_standalone(ds: xr.Dataset, out: str | Path, title: str = "") -> None:
                 continue
             c, ls = styles.get(str(m), ("k", "-"))
             conv = "" if bool(row["converged"].values) else f", stopped at {float(row['load_factor']):.2f}"
-            ax.plot(row["backbone_x_mm"], row["backbone_y_mm"], ls, color=c,
-                    label=f"{m}: tip {float(row['tip_angle_deg']):.0f} deg{conv}")
+            ax.plot(
+                row["backbone_x_mm"],
+                row["backbone_y_mm"],
+                ls,
+                color=c,
+                label=f"{m}: tip {float(row['tip_angle_deg']):.0f} deg{conv}",
+            )
         ax.set_aspect("equal")
         ax.set_title(str(e), fontsize=8)
         ax.legend(fontsize=6)

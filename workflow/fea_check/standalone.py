@@ -20,19 +20,19 @@ Lengths mm, angles deg, pressures kPa.
 from __future__ import annotations
 
 import logging
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
 
 from workflow import fem
-from workflow.cascade import CHAMBERS, GROUPS
-from workflow.fea_check import MAPPING_FLAGS, applied_limit, load_surrogate_angles, pressures_2d
-from workflow.fem._actuator import solve_standalone
+from workflow.cascade.model import GROUPS
+from workflow.common.constants import CHAMBERS, CHECK_MAPPING_STATUS, SOLVER_STATUS
+from workflow.common.runlog import solved
 from workflow.fem._mesh import build_actuator_mesh
-from workflow.runlog import solved
+from workflow.fem.actuator import solve_standalone
 
-__all__ = ["MODELS", "resample_backbone", "standalone_dataset", "write_standalone"]
+__all__ = ["MODELS", "resample_backbone", "standalone_dataset"]
 
 log = logging.getLogger(__name__)
 MODELS = ("2d_mapped", "2d_plan", "3d_plan")
@@ -43,9 +43,19 @@ def resample_backbone(curve: np.ndarray, ref: np.ndarray, stations: np.ndarray) 
     return np.interp(stations, ref[:, 0], curve[:, 0]), np.interp(stations, ref[:, 0], curve[:, 1])
 
 
-def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Sequence[str], actuator_cfg: Mapping,
-                       h_2d_mm: float, h_3d_mm: float | Sequence[float], solver: Mapping, p2: np.ndarray,
-                       flag: np.ndarray, n_stations: int = 41) -> xr.Dataset:
+def standalone_dataset(
+    plan: xr.Dataset,
+    *,
+    exercises: Sequence[str],
+    models: Sequence[str],
+    actuator_cfg: Mapping,
+    h_2d_mm: float,
+    h_3d_mm: float | Sequence[float],
+    solver: Mapping,
+    p2: np.ndarray,
+    flag: np.ndarray,
+    n_stations: int = 41,
+) -> xr.Dataset:
     """Solve every (exercise, model) and collect curves and tip angles.
 
     ``h_3d_mm``: one element size or several, tried coarse to fine per
@@ -85,83 +95,148 @@ def standalone_dataset(plan: xr.Dataset, *, exercises: Sequence[str], models: Se
             pk = p2[i] if m == "2d_mapped" else p_plan[i]
             press = {g: (float(pk[k, 0]), float(pk[k, 1])) for k, g in enumerate(GROUPS)}
             t_case = 0.0
-            for h in (h3_list if dim == 3 else [float(h_2d_mm)]):
-                r = solve_standalone(mesh(dim, h), press, material=mat, contact_options=contact, solver=solver,
-                                     formulation=formulation)
+            for h in h3_list if dim == 3 else [float(h_2d_mm)]:
+                r = solve_standalone(
+                    mesh(dim, h), press, material=mat, contact_options=contact, solver=solver, formulation=formulation
+                )
                 t_case += r.wall_time_s
-                log.info("%s %s (h = %g mm, %d dofs): tip %.1f deg, status %d at %.3f, %d its, %.1f s", ex, m, h,
-                         r.ndofs, r.tip_angle_deg, r.status, r.load_factor, r.newton_iterations, r.wall_time_s,
-                         extra=solved(r.status != 0))
+                log.info(
+                    "%s %s (h = %g mm, %d dofs): tip %.1f deg, status %d at %.3f, %d its, %.1f s",
+                    ex,
+                    m,
+                    h,
+                    r.ndofs,
+                    r.tip_angle_deg,
+                    r.status,
+                    r.load_factor,
+                    r.newton_iterations,
+                    r.wall_time_s,
+                    extra=solved(r.status != 0),
+                )
                 if r.status == 0:
                     break
             bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)
             tip[i, j], lam[i, j], status[i, j] = r.tip_angle_deg, r.load_factor, r.status
             its[i, j], wall[i, j], ndofs[i, j], h_used[i, j] = r.newton_iterations, t_case, r.ndofs, h
             pen[i, j], overlap[i, j], pocket[dim][i, j] = r.max_penetration_mm, r.overlap_depth_mm, r.min_pocket
-    flag_vals = np.array(sorted(fem.STATUS_FLAGS), dtype="i1")
-    map_vals = np.array(sorted(MAPPING_FLAGS), dtype="i1")
+    flag_vals = np.array(sorted(SOLVER_STATUS), dtype="i1")
+    map_vals = np.array(sorted(CHECK_MAPPING_STATUS), dtype="i1")
     ds = xr.Dataset(
         {
-            "backbone_x_mm": (("exercise", "model", "station"), bx, {"units": "mm", "long_name": "deformed backbone x (hand end at 0)"}),
-            "backbone_y_mm": (("exercise", "model", "station"), by, {"units": "mm", "long_name": "deformed backbone y (paper layer at 0)"}),
-            "tip_angle_deg": (("exercise", "model"), tip, {"units": "degree", "long_name": "backbone rotation at the tip (positive towards the bottom side)"}),
-            "converged": (("exercise", "model"), (status == 0) & (lam >= 1 - 1e-9), {"units": "1", "long_name": "pressures reached in full"}),
-            "load_factor": (("exercise", "model"), lam, {"units": "1", "long_name": "last converged fraction of the pressures"}),
-            "status": (("exercise", "model"), status, {"units": "1", "long_name": "solver status", "flag_values": flag_vals,
-                                                       "flag_meanings": " ".join(fem.STATUS_FLAGS[int(v)] for v in flag_vals)}),
+            "backbone_x_mm": (
+                ("exercise", "model", "station"),
+                bx,
+                {"units": "mm", "long_name": "deformed backbone x (hand end at 0)"},
+            ),
+            "backbone_y_mm": (
+                ("exercise", "model", "station"),
+                by,
+                {"units": "mm", "long_name": "deformed backbone y (paper layer at 0)"},
+            ),
+            "tip_angle_deg": (
+                ("exercise", "model"),
+                tip,
+                {"units": "degree", "long_name": "backbone rotation at the tip (positive towards the bottom side)"},
+            ),
+            "converged": (
+                ("exercise", "model"),
+                (status == 0) & (lam >= 1 - 1e-9),
+                {"units": "1", "long_name": "pressures reached in full"},
+            ),
+            "load_factor": (
+                ("exercise", "model"),
+                lam,
+                {"units": "1", "long_name": "last converged fraction of the pressures"},
+            ),
+            "status": (
+                ("exercise", "model"),
+                status,
+                {
+                    "units": "1",
+                    "long_name": "solver status",
+                    "flag_values": flag_vals,
+                    "flag_meanings": " ".join(SOLVER_STATUS[int(v)] for v in flag_vals),
+                },
+            ),
             "newton_iterations": (("exercise", "model"), its, {"units": "1", "long_name": "Newton iterations"}),
-            "wall_time_s": (("exercise", "model"), wall, {"units": "s", "long_name": "wall time of the solves (incl. coarser meshes that failed)"}),
+            "wall_time_s": (
+                ("exercise", "model"),
+                wall,
+                {"units": "s", "long_name": "wall time of the solves (incl. coarser meshes that failed)"},
+            ),
             "ndofs": (("exercise", "model"), ndofs, {"units": "1", "long_name": "degrees of freedom of the mesh kept"}),
-            "max_penetration_mm": (("exercise", "model"), pen, {"units": "mm", "long_name": "largest penetration over the path (contact or overlap check)"}),
-            "overlap_depth_mm": (("exercise", "model"), overlap, {"units": "mm", "long_name": "deepest boundary node inside another element over the path"}),
-            "min_pocket_area_mm2": (("exercise", "model"), pocket[2], {"units": "mm2", "long_name": "smallest pocket area over the path (2D models)"}),
-            "min_pocket_volume_mm3": (("exercise", "model"), pocket[3], {"units": "mm3", "long_name": "smallest pocket volume over the path (3D models)"}),
-            "h_used_mm": (("exercise", "model"), h_used, {"units": "mm", "long_name": "element size kept (3D: the coarsest that converged, else the finest tried)"}),
-            "pressure_plan_kpa": (("exercise", "group", "chamber"), p_plan, {"units": "kPa", "long_name": "planned (3D) pressure"}),
-            "pressure_2d_kpa": (("exercise", "group", "chamber"), p2, {"units": "kPa", "long_name": "2D pressure of the mapping"}),
-            "mapping_status": (("exercise", "group"), flag.astype("i1"), {
-                "units": "1", "long_name": "how the 2D pressure pair was obtained",
-                "flag_values": map_vals, "flag_meanings": " ".join(MAPPING_FLAGS[int(v)] for v in map_vals)}),
+            "max_penetration_mm": (
+                ("exercise", "model"),
+                pen,
+                {"units": "mm", "long_name": "largest penetration over the path (contact or overlap check)"},
+            ),
+            "overlap_depth_mm": (
+                ("exercise", "model"),
+                overlap,
+                {"units": "mm", "long_name": "deepest boundary node inside another element over the path"},
+            ),
+            "min_pocket_area_mm2": (
+                ("exercise", "model"),
+                pocket[2],
+                {"units": "mm2", "long_name": "smallest pocket area over the path (2D models)"},
+            ),
+            "min_pocket_volume_mm3": (
+                ("exercise", "model"),
+                pocket[3],
+                {"units": "mm3", "long_name": "smallest pocket volume over the path (3D models)"},
+            ),
+            "h_used_mm": (
+                ("exercise", "model"),
+                h_used,
+                {
+                    "units": "mm",
+                    "long_name": "element size kept (3D: the coarsest that converged, else the finest tried)",
+                },
+            ),
+            "pressure_plan_kpa": (
+                ("exercise", "group", "chamber"),
+                p_plan,
+                {"units": "kPa", "long_name": "planned (3D) pressure"},
+            ),
+            "pressure_2d_kpa": (
+                ("exercise", "group", "chamber"),
+                p2,
+                {"units": "kPa", "long_name": "2D pressure of the mapping"},
+            ),
+            "mapping_status": (
+                ("exercise", "group"),
+                flag.astype("i1"),
+                {
+                    "units": "1",
+                    "long_name": "how the 2D pressure pair was obtained",
+                    "flag_values": map_vals,
+                    "flag_meanings": " ".join(CHECK_MAPPING_STATUS[int(v)] for v in map_vals),
+                },
+            ),
         },
-        coords={"exercise": list(exercises), "model": list(models), "station": stations, "group": list(GROUPS),
-                "chamber": list(CHAMBERS)},
+        coords={
+            "exercise": list(exercises),
+            "model": list(models),
+            "station": stations,
+            "group": list(GROUPS),
+            "chamber": list(CHAMBERS),
+        },
     )
     ds["station"].attrs = {"units": "mm", "long_name": "position along the undeformed backbone from the hand end"}
     if "2d_mapped" in models and "3d_plan" in models:
-        d = np.hypot(ds["backbone_x_mm"].sel(model="2d_mapped") - ds["backbone_x_mm"].sel(model="3d_plan"),
-                     ds["backbone_y_mm"].sel(model="2d_mapped") - ds["backbone_y_mm"].sel(model="3d_plan"))
-        ds["profile_rms_mm"] = (("exercise",), np.sqrt((d**2).mean("station")).values,
-                                {"units": "mm", "long_name": "RMS distance of the 2d_mapped and 3d_plan backbone curves"})
-        ds["tip_angle_diff_deg"] = (("exercise",), (ds["tip_angle_deg"].sel(model="2d_mapped") - ds["tip_angle_deg"].sel(model="3d_plan")).values,
-                                    {"units": "degree", "long_name": "tip angle 2d_mapped minus 3d_plan"})
+        d = np.hypot(
+            ds["backbone_x_mm"].sel(model="2d_mapped") - ds["backbone_x_mm"].sel(model="3d_plan"),
+            ds["backbone_y_mm"].sel(model="2d_mapped") - ds["backbone_y_mm"].sel(model="3d_plan"),
+        )
+        ds["profile_rms_mm"] = (
+            ("exercise",),
+            np.sqrt((d**2).mean("station")).values,
+            {"units": "mm", "long_name": "RMS distance of the 2d_mapped and 3d_plan backbone curves"},
+        )
+        ds["tip_angle_diff_deg"] = (
+            ("exercise",),
+            (ds["tip_angle_deg"].sel(model="2d_mapped") - ds["tip_angle_deg"].sel(model="3d_plan")).values,
+            {"units": "degree", "long_name": "tip angle 2d_mapped minus 3d_plan"},
+        )
     ds.attrs.update({"h_2d_mm": float(h_2d_mm), "h_3d_mm_tried": str(h3_list), "units_per_group": str(upg)})
-    return ds
-
-
-def write_standalone(patient_name: str, *, plan_nc: str, out_nc: str, out_png: str | None, fea_cfg: Mapping,
-                     actuator_cfg: Mapping, cascade_cfg: Mapping, config_slice: Any, surrogate_2d: str | None = None,
-                     surrogate_3d: str | None = None, rule: str = "standalone_actuator") -> xr.Dataset:
-    """The rule's entry point (see the module docstring)."""
-    from workflow.provenance import open_result, write_dataset
-
-    plan = open_result(plan_nc)
-    sa = dict(fea_cfg.get("standalone", {}))
-    ex = list(sa.get("exercises") or fea_cfg.get("exercises") or [str(e) for e in plan["exercise"].values])
-    models = list(sa.get("models", MODELS))
-    use_map = bool(fea_cfg.get("map_pressures", True)) and cascade_cfg.get("surrogate", "3d") == "3d"
-    a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
-    p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
-    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
-    solver = dict(actuator_cfg.get("solver", {}))
-    solver.update(dict(fea_cfg.get("solver", {})))
-    ds = standalone_dataset(plan, exercises=ex, models=models, actuator_cfg=actuator_cfg,
-                            h_2d_mm=float(fea_cfg.get("h_actuator_mm", 2.0)), h_3d_mm=sa.get("h_3d_mm", [4.0, 3.0]),
-                            solver=solver, p2=p2, flag=flag)
-    ds.attrs["patient"] = patient_name
-    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
-                  title=f"Stand-alone whole actuators at the plan's pressures, patient {patient_name}")
-    if out_png:
-        from workflow.plots_fea_check import plot_standalone
-
-        plot_standalone(ds, out_png, title=f"patient {patient_name}")
     return ds

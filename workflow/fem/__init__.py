@@ -36,19 +36,40 @@ Newton with line search and adaptive load steps.  Every accepted step also
 records the global overlap check (``overlap_measures``: deepest boundary
 node inside a foreign element, smallest pocket).  Units: mm, MPa, N (kPa for
 pressures and N m for the reported moments).
+
+The whole-actuator models are public modules of their own:
+:mod:`workflow.fem.actuator` (the stand-alone actuator of groups of units),
+:mod:`workflow.fem.coupled` (the actuator strapped on a finger) and
+:mod:`workflow.fem.finger2d` (the finger's 2D section).
 """
 
+from ..common.constants import SOLVER_STATUS
 from ._assembly import SolidAssembler
-from ._config import layer_options, solve_unit_from_config, unit_check, unit_mesh_from_config, write_deformed_vtu, write_unit_check
+from ._config import layer_options, solve_unit_from_config, unit_check, unit_mesh_from_config
 from ._contact import ContactPair
 from ._material import mooney_rivlin_isochoric, neo_hooke_compressible
 from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh, layer_counts
-from ._pressure import pressure_load
-from ._solve import DEFAULT_SOLVER, STATUS_FLAGS, Model, PathResult, linear_solve, solve_path
 from ._overlap import overlap_depth, overlap_measures, pocket_sizes
-from ._unit import (CASES, DEFAULT_CONTACT, DEFAULT_END_HOLD, DEFAULT_FORMULATION, DEFAULT_MATERIAL, END_HOLDS,
-                    FORMULATIONS, UnitResult, clamp_inclination_deg, clamp_rotation, contact_penalty, held_end_nodes,
-                    material_constants, solid_assembler, solve_unit, unit_model)
+from ._pressure import pressure_load
+from ._solve import DEFAULT_SOLVER, Model, PathResult, linear_solve, solve_path
+from ._unit import (
+    CASES,
+    DEFAULT_CONTACT,
+    DEFAULT_END_HOLD,
+    DEFAULT_FORMULATION,
+    DEFAULT_MATERIAL,
+    END_HOLDS,
+    FORMULATIONS,
+    UnitResult,
+    clamp_inclination_deg,
+    clamp_rotation,
+    contact_penalty,
+    held_end_nodes,
+    material_constants,
+    solid_assembler,
+    solve_unit,
+    unit_model,
+)
 
 __all__ = [
     "CASES",
@@ -60,7 +81,7 @@ __all__ = [
     "DEFAULT_SOLVER",
     "END_HOLDS",
     "FORMULATIONS",
-    "STATUS_FLAGS",
+    "SOLVER_STATUS",
     "ContactPair",
     "Model",
     "PathResult",
@@ -90,6 +111,4 @@ __all__ = [
     "unit_check",
     "unit_mesh_from_config",
     "unit_model",
-    "write_deformed_vtu",
-    "write_unit_check",
 ]

@@ -3,18 +3,18 @@
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 import xarray as xr
 
-from ._mesh import build_unit_mesh
-from ._solve import STATUS_FLAGS
-from ._unit import DEFAULT_CONTACT, DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
-from ..runlog import solved
+from workflow.common.constants import SOLVER_STATUS
+from workflow.common.runlog import solved
 
-__all__ = ["DEFAULT_RESTARTS", "layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check", "write_unit_check", "write_deformed_vtu"]
+from ._mesh import build_unit_mesh
+from ._unit import DEFAULT_CONTACT, DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
+
+__all__ = ["DEFAULT_RESTARTS", "layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check"]
 
 log = logging.getLogger(__name__)
 
@@ -50,8 +50,9 @@ def _merged(actuator: Mapping, override: Mapping) -> dict:
     return out
 
 
-def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bottom_kpa: float, case: str = "free",
-                           mesh=None, **kwargs) -> UnitResult:
+def solve_unit_from_config(
+    actuator: Mapping, dim: int, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", mesh=None, **kwargs
+) -> UnitResult:
     """``solve_unit`` with geometry, mesh size, material, contact and solver from ``actuator``.
 
     ``mesh`` (a ``UnitMesh``) can be passed to reuse one across calls. A ray
@@ -72,8 +73,17 @@ def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bott
         enabled = contact.pop("enabled", True)
         if attempt and not enabled and set(override) <= {"contact"}:
             continue  # without contact a contact-only restart repeats the same solve
-        res = solve_unit(um, p_top_kpa, p_bottom_kpa, case, enabled, material=act.get("material"),
-                         contact_options=contact, solver=act.get("solver"), **kwargs)
+        res = solve_unit(
+            um,
+            p_top_kpa,
+            p_bottom_kpa,
+            case,
+            enabled,
+            material=act.get("material"),
+            contact_options=contact,
+            solver=act.get("solver"),
+            **kwargs,
+        )
         res.attempt = attempt
         res.contact_smoothing_mm = float(contact.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
         spent += res.wall_time_s
@@ -82,8 +92,16 @@ def solve_unit_from_config(actuator: Mapping, dim: int, p_top_kpa: float, p_bott
             return res
         if best is None or res.load_factor > best.load_factor:
             best = res
-        log.info("%dd %s to (%g, %g) kPa: attempt %d stopped at %.0f %% (%s)", dim, case, p_top_kpa, p_bottom_kpa,
-                 attempt + 1, 100 * res.load_factor, res.reason)
+        log.info(
+            "%dd %s to (%g, %g) kPa: attempt %d stopped at %.0f %% (%s)",
+            dim,
+            case,
+            p_top_kpa,
+            p_bottom_kpa,
+            attempt + 1,
+            100 * res.load_factor,
+            res.reason,
+        )
     best.wall_time_s = spent
     return best
 
@@ -114,10 +132,27 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
         dim = int(model[0])
         mesh = unit_mesh_from_config(actuator, dim)
         for k, case in enumerate(cases):
-            res = solve_unit_from_config(actuator, dim, pmax, 0.0, case, mesh=mesh, stops=tuple(p_top_kpa / pmax),
-                                         keep_displacement=(dim == 3 and case == "free"))
-            log.info("%s %s to P_T=%g kPa: status %d (%s), %d iterations, %.1f s", model, case, pmax, res.status,
-                     res.reason, res.newton_iterations, res.wall_time_s, extra=solved(res.status != 0))
+            res = solve_unit_from_config(
+                actuator,
+                dim,
+                pmax,
+                0.0,
+                case,
+                mesh=mesh,
+                stops=tuple(p_top_kpa / pmax),
+                keep_displacement=(dim == 3 and case == "free"),
+            )
+            log.info(
+                "%s %s to P_T=%g kPa: status %d (%s), %d iterations, %.1f s",
+                model,
+                case,
+                pmax,
+                res.status,
+                res.reason,
+                res.newton_iterations,
+                res.wall_time_s,
+                extra=solved(res.status != 0),
+            )
             for j, p in enumerate(p_top_kpa):
                 hit = [h for h in res.history if abs(h["p_top_kpa"] - p) < 1e-6 * pmax]
                 if not hit:  # the ray failed before this pressure
@@ -135,27 +170,64 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
                 angle[i, j, k] = h["bending_angle_deg"]
                 angle_total[i, j, k] = h["bending_angle_total_deg"]
                 moment[i, j, k] = h["bending_moment_nm"]
-                log.info("  P_T=%g kPa: angle %.3f deg/unit, moment %.4f N m", p, h["bending_angle_deg"], h["bending_moment_nm"])
+                log.info(
+                    "  P_T=%g kPa: angle %.3f deg/unit, moment %.4f N m",
+                    p,
+                    h["bending_angle_deg"],
+                    h["bending_moment_nm"],
+                )
             if res.displacement is not None and res.status == 0:
                 deformed = (mesh, res.displacement)
     dims3 = ("model", "p_top_kpa", "case")
     ds = xr.Dataset(
         {
-            "bending_angle_deg": (("model", "p_top_kpa"), angle[:, :, 0],
-                                  {"units": "degree", "long_name": "free bending angle per unit (chamber), P_B = 0"}),
-            "bending_angle_total_deg": (("model", "p_top_kpa"), angle_total[:, :, 0],
-                                        {"units": "degree", "long_name": "free bending angle of the three-chamber unit model"}),
-            "bending_moment_nm": (("model", "p_top_kpa"), moment[:, :, 1],
-                                  {"units": "N m", "long_name": "blocked moment per unit, full actuator width"}),
-            "max_penetration_mm": (dims3, pen, {"units": "mm", "long_name": "largest penetration over the load path (contact or overlap check)"}),
-            "overlap_depth_mm": (dims3, overlap, {"units": "mm", "long_name": "deepest boundary node inside another element over the load path"}),
-            "min_pocket_area_mm2": (dims3, pocket[2], {"units": "mm2", "long_name": "smallest pocket area over the load path (2D; 36.4 at rest)"}),
-            "min_pocket_volume_mm3": (dims3, pocket[3], {"units": "mm3", "long_name": "smallest pocket volume over the load path (3D; 509.6 at rest)"}),
+            "bending_angle_deg": (
+                ("model", "p_top_kpa"),
+                angle[:, :, 0],
+                {"units": "degree", "long_name": "free bending angle per unit (chamber), P_B = 0"},
+            ),
+            "bending_angle_total_deg": (
+                ("model", "p_top_kpa"),
+                angle_total[:, :, 0],
+                {"units": "degree", "long_name": "free bending angle of the three-chamber unit model"},
+            ),
+            "bending_moment_nm": (
+                ("model", "p_top_kpa"),
+                moment[:, :, 1],
+                {"units": "N m", "long_name": "blocked moment per unit, full actuator width"},
+            ),
+            "max_penetration_mm": (
+                dims3,
+                pen,
+                {"units": "mm", "long_name": "largest penetration over the load path (contact or overlap check)"},
+            ),
+            "overlap_depth_mm": (
+                dims3,
+                overlap,
+                {"units": "mm", "long_name": "deepest boundary node inside another element over the load path"},
+            ),
+            "min_pocket_area_mm2": (
+                dims3,
+                pocket[2],
+                {"units": "mm2", "long_name": "smallest pocket area over the load path (2D; 36.4 at rest)"},
+            ),
+            "min_pocket_volume_mm3": (
+                dims3,
+                pocket[3],
+                {"units": "mm3", "long_name": "smallest pocket volume over the load path (3D; 509.6 at rest)"},
+            ),
             "wall_time_s": (dims3, wall, {"units": "s", "long_name": "wall time of the solve from zero load"}),
             "newton_iterations": (dims3, iters, {"units": "1", "long_name": "Newton iterations over the load path"}),
-            "status": (dims3, status, {"units": "1", "long_name": "solver status",
-                                       "flag_values": np.array(list(STATUS_FLAGS), dtype=np.int32),
-                                       "flag_meanings": " ".join(STATUS_FLAGS.values())}),
+            "status": (
+                dims3,
+                status,
+                {
+                    "units": "1",
+                    "long_name": "solver status",
+                    "flag_values": np.array(list(SOLVER_STATUS), dtype=np.int32),
+                    "flag_meanings": " ".join(SOLVER_STATUS.values()),
+                },
+            ),
         },
         coords={
             "model": ("model", list(models)),
@@ -165,46 +237,3 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
         },
     )
     return ds, deformed
-
-
-def write_deformed_vtu(deformed, path: str | Path) -> Path:
-    """Write a deformed unit (mesh, displacement) as .vtu with the displacement as point data."""
-    mesh, u = deformed
-    dim = mesh.dim
-    disp = u.reshape(-1, dim)
-    if dim == 2:
-        disp = np.column_stack([disp, np.zeros(len(disp))])
-    return mesh.write(path, point_data={"displacement": disp})
-
-
-def write_unit_check(nc_path: str | Path, vtu_path: str | Path, actuator: Mapping, *, rule: str = "unit_check",
-                     config_slice=None, model_actuators: Mapping[str, Mapping] | None = None,
-                     attrs: Mapping | None = None) -> None:
-    """Run ``unit_check`` with the config's points and write the dataset and the deformed 3D unit.
-
-    ``model_actuators``: a config per model (``{"2d": ..., "3d": ...}``, e.g.
-    the meshes a fidelity study chose), else ``actuator`` for all; ``attrs``
-    are added to the dataset.  If the 3D model is not requested or its ray
-    fails, the .vtu holds the undeformed 3D mesh with zero displacement (and
-    the dataset's status says why).
-    """
-    from ..provenance import write_dataset
-
-    uc = dict(actuator.get("unit_check", {}))
-    models = tuple(uc.get("models", ("2d", "3d")))
-    p_top = uc.get("p_top_kpa", (60.0, 180.0, 300.0))
-    if model_actuators:
-        parts = [unit_check(model_actuators.get(m, actuator), (m,), p_top) for m in models]
-        ds = xr.concat([p[0] for p in parts], dim="model")
-        deformed = next((p[1] for p in parts if p[1] is not None), None)
-        actuator = model_actuators.get("3d", actuator)
-    else:
-        ds, deformed = unit_check(actuator, models, p_top)
-    ds.attrs.update({k: str(v) for k, v in dict(attrs or {}).items()})
-    write_dataset(ds, nc_path, rule=rule, config_slice=config_slice if config_slice is not None else dict(actuator),
-                  title="PNA unit check: free bending angle and blocked moment at P_T = 60, 180, 300 kPa (P_B = 0)",
-                  source="workflow.fem (scikit-fem; Q1/P0 silicone, enhanced-strain paper layer, follower pressure, penalty self-contact)")
-    if deformed is None:
-        mesh = unit_mesh_from_config(actuator, 3)
-        deformed = (mesh, np.zeros(mesh.mesh.p.size))
-    write_deformed_vtu(deformed, vtu_path)

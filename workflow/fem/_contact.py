@@ -29,6 +29,8 @@ force are then continuous as a slave crosses a master node (a standard fix,
 e.g. Wriggers, Computational Contact Mechanics, ch. 9 on smoothing).  The
 force is not the gradient of a potential any more (the tangent is not
 symmetric); Newton uses its exact finite-difference tangent.
+
+Over 400 lines: the penalty law, the facet search and its exact tangent are one algorithm; their conventions (facet orientation, parameter ranges) must change together.
 """
 
 from __future__ import annotations
@@ -68,10 +70,20 @@ def _chain_neighbours(facets: np.ndarray, part: np.ndarray | None = None) -> tup
     first = {int(a): k for k, a in enumerate(facets[:, 0])}
     second = {int(b): k for k, b in enumerate(facets[:, 1])}
     same = (lambda k, j: True) if part is None else (lambda k, j: part[k] == part[j])
-    prev = np.array([facets[second[int(a)], 0] if int(a) in second and same(k, second[int(a)]) else -1
-                     for k, a in enumerate(facets[:, 0])], dtype=np.int64)
-    nxt = np.array([facets[first[int(b)], 1] if int(b) in first and same(k, first[int(b)]) else -1
-                    for k, b in enumerate(facets[:, 1])], dtype=np.int64)
+    prev = np.array(
+        [
+            facets[second[int(a)], 0] if int(a) in second and same(k, second[int(a)]) else -1
+            for k, a in enumerate(facets[:, 0])
+        ],
+        dtype=np.int64,
+    )
+    nxt = np.array(
+        [
+            facets[first[int(b)], 1] if int(b) in first and same(k, first[int(b)]) else -1
+            for k, b in enumerate(facets[:, 1])
+        ],
+        dtype=np.int64,
+    )
     return prev, nxt
 
 
@@ -184,8 +196,17 @@ class ContactPair:
         ``evaluate`` (the model's), e.g. a softer contact with flesh.
     """
 
-    def __init__(self, p: np.ndarray, slave_facets, master_facets, search: float = 1.0, extend: float = 0.5,
-                 smoothing: float = 0.0, smooth_normals: bool = True, penalty_factor: float = 1.0):
+    def __init__(
+        self,
+        p: np.ndarray,
+        slave_facets,
+        master_facets,
+        search: float = 1.0,
+        extend: float = 0.5,
+        smoothing: float = 0.0,
+        smooth_normals: bool = True,
+        penalty_factor: float = 1.0,
+    ):
         slaves = slave_facets if isinstance(slave_facets, (list, tuple)) else [slave_facets]
         masters = master_facets if isinstance(master_facets, (list, tuple)) else [master_facets]
         if len(slaves) != len(masters):
@@ -193,13 +214,31 @@ class ContactPair:
         trib = [_tributary(p, f) for f in slaves]
         starts = np.cumsum([0] + [f.shape[0] for f in masters])
         pools = [[np.arange(starts[k], starts[k + 1])] * nd.size for k, (nd, _) in enumerate(trib)]
-        self._setup(p, np.concatenate([nd for nd, _ in trib]), np.concatenate([a for _, a in trib]),
-                    np.concatenate(masters), [q for pool in pools for q in pool], search, extend, smoothing,
-                    smooth_normals, penalty_factor)
+        self._setup(
+            p,
+            np.concatenate([nd for nd, _ in trib]),
+            np.concatenate([a for _, a in trib]),
+            np.concatenate(masters),
+            [q for pool in pools for q in pool],
+            search,
+            extend,
+            smoothing,
+            smooth_normals,
+            penalty_factor,
+        )
 
     @classmethod
-    def self_contact(cls, p: np.ndarray, surfaces, search: float = 1.0, extend: float = 0.5, smoothing: float = 0.0,
-                     smooth_normals: bool = True, penalty_factor: float = 1.0, parts=None) -> "ContactPair":
+    def self_contact(
+        cls,
+        p: np.ndarray,
+        surfaces,
+        search: float = 1.0,
+        extend: float = 0.5,
+        smoothing: float = 0.0,
+        smooth_normals: bool = True,
+        penalty_factor: float = 1.0,
+        parts=None,
+    ) -> "ContactPair":
         """Self-contact of each surface (list of outward-oriented facet arrays; surfaces must not share nodes).
 
         ``parts``: per surface a part id per facet (or None): see ``_excluded``.
@@ -221,12 +260,35 @@ class ContactPair:
             slave.append(nd[keep])
             area.append(a[keep])
             start += f.shape[0]
-        obj._setup(p, np.concatenate(slave), np.concatenate(area), np.concatenate(list(surfaces)), pools, search,
-                   extend, smoothing, smooth_normals, penalty_factor, master_part=np.concatenate(part_ids))
+        obj._setup(
+            p,
+            np.concatenate(slave),
+            np.concatenate(area),
+            np.concatenate(list(surfaces)),
+            pools,
+            search,
+            extend,
+            smoothing,
+            smooth_normals,
+            penalty_factor,
+            master_part=np.concatenate(part_ids),
+        )
         return obj
 
-    def _setup(self, p, slave, area, master_facets, pools, search, extend, smoothing, smooth_normals, penalty_factor,
-               master_part=None):
+    def _setup(
+        self,
+        p,
+        slave,
+        area,
+        master_facets,
+        pools,
+        search,
+        extend,
+        smoothing,
+        smooth_normals,
+        penalty_factor,
+        master_part=None,
+    ):
         """Common set-up: slave nodes (ns,), their areas, master facets and per slave its facet ids."""
         self.dim = p.shape[0]
         self.penalty_factor = float(penalty_factor)
@@ -237,8 +299,11 @@ class ContactPair:
         self.master = master_facets
         # per slave the facet ids it may pair with, padded by repeating its first (masked by a large distance)
         width = max((q.size for q in pools), default=1)
-        self._pool = (np.stack([np.concatenate([q, np.full(width - q.size, q[0])]) for q in pools]) if pools
-                      else np.zeros((0, width), np.int64))
+        self._pool = (
+            np.stack([np.concatenate([q, np.full(width - q.size, q[0])]) for q in pools])
+            if pools
+            else np.zeros((0, width), np.int64)
+        )
         self._pad = np.where(np.arange(width)[None, :] >= np.array([q.size for q in pools])[:, None], 1e9, 0.0)
         self.search = search
         # allowed parameter range per master facet: [0, 1] (2D) / [-1, 1]^2 (3D), widened at free edges
@@ -261,9 +326,13 @@ class ContactPair:
             _, inv, cnt = np.unique(keys.reshape(-1, 2), axis=0, return_inverse=True, return_counts=True)
             free = (cnt[inv.ravel()] == 1).reshape(-1, 4)
             wide = 1.0 + 2.0 * extend
-            self.lim = np.stack([np.stack([np.where(free[:, 3], -wide, -1.0), np.where(free[:, 1], wide, 1.0)], -1),
-                                 np.stack([np.where(free[:, 0], -wide, -1.0), np.where(free[:, 2], wide, 1.0)], -1)],
-                                axis=1)  # (nm, 2 directions, lo/hi)
+            self.lim = np.stack(
+                [
+                    np.stack([np.where(free[:, 3], -wide, -1.0), np.where(free[:, 1], wide, 1.0)], -1),
+                    np.stack([np.where(free[:, 0], -wide, -1.0), np.where(free[:, 2], wide, 1.0)], -1),
+                ],
+                axis=1,
+            )  # (nm, 2 directions, lo/hi)
 
     def _project(self, x: np.ndarray):
         """Closest master facet per slave: (facet index, N (ns, nfn), n (ns, dim), g (ns,), inside)."""
@@ -286,7 +355,13 @@ class ContactPair:
             a1 = np.einsum("ska,skai->ski", dxi, X)
             a2 = np.einsum("ska,skai->ski", deta, X)
             r = xs[:, None, :] - xp
-            M = np.stack([np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1), np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1)], -2)
+            M = np.stack(
+                [
+                    np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1),
+                    np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1),
+                ],
+                -2,
+            )
             rhs = np.stack([(r * a1).sum(-1), (r * a2).sum(-1)], -1)
             ab = np.clip(ab + np.linalg.solve(M, rhs[..., None])[..., 0], -3.0, 3.0)
         N = 0.25 * (1 + _XI[:, 0] * ab[..., 0, None]) * (1 + _XI[:, 1] * ab[..., 1, None])
@@ -372,8 +447,13 @@ class ContactPair:
                 a1 = np.einsum("ca,cai->ci", dxi, xm)
                 a2 = np.einsum("ca,cai->ci", deta, xm)
                 r = xs - np.einsum("ca,cai->ci", N, xm)
-                M = np.stack([np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1),
-                              np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1)], -2)
+                M = np.stack(
+                    [
+                        np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1),
+                        np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1),
+                    ],
+                    -2,
+                )
                 rhs = np.stack([(r * a1).sum(-1), (r * a2).sum(-1)], -1)
                 ab = ab + np.linalg.solve(M, rhs[..., None])[..., 0]
             N = 0.25 * (1 + _XI[:, 0] * ab[:, 0, None]) * (1 + _XI[:, 1] * ab[:, 1, None])
@@ -384,9 +464,11 @@ class ContactPair:
             (L,) = lim  # (nc, 2 directions, lo/hi)
             lo, hi = L[..., 0], L[..., 1]
             # the penalty fades to 0 across the widened range past a free edge (continuous as a slave slides off)
-            w = np.prod(np.where((ab > 1) & (hi > 1), _window((hi - ab) / np.maximum(hi - 1.0, 1e-12)), 1.0)
-                        * np.where((ab < -1) & (lo < -1), _window((ab - lo) / np.maximum(-1.0 - lo, 1e-12)), 1.0),
-                        axis=1)
+            w = np.prod(
+                np.where((ab > 1) & (hi > 1), _window((hi - ab) / np.maximum(hi - 1.0, 1e-12)), 1.0)
+                * np.where((ab < -1) & (lo < -1), _window((ab - lo) / np.maximum(-1.0 - lo, 1e-12)), 1.0),
+                axis=1,
+            )
         g = np.einsum("ci,ci->c", xs - np.einsum("ca,cai->ci", N, xm), n)
         coef = np.concatenate([np.ones((X.shape[0], 1)), -N], axis=1)
         dg = (coef[:, :, None] * n[:, None, :]).reshape(X.shape[0], -1)
@@ -442,8 +524,9 @@ class ContactPair:
         return float(np.sum(0.5 * eps * self.penalty_factor * self.area[ok] * g[ok] ** 2))
 
 
-def contact_pairs_from_mesh(unit_mesh, search: float = 1.0, extend: float = 0.5, smoothing: float = 0.0,
-                            smooth_normals: bool = True) -> list[ContactPair]:
+def contact_pairs_from_mesh(
+    unit_mesh, search: float = 1.0, extend: float = 0.5, smoothing: float = 0.0, smooth_normals: bool = True
+) -> list[ContactPair]:
     """Self-contact of every contact surface of a ``UnitMesh`` (each gap's U, each pocket's walls) as one pair.
 
     Every node of a surface is slave against the facets of the same surface
@@ -457,4 +540,6 @@ def contact_pairs_from_mesh(unit_mesh, search: float = 1.0, extend: float = 0.5,
     if not surfaces:
         return []
     parts = [unit_mesh.contact_parts.get(name) for name in unit_mesh.contact_surfaces]
-    return [ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals, parts=parts)]
+    return [
+        ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals, parts=parts)
+    ]

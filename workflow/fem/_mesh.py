@@ -37,7 +37,6 @@ two sides and the backbone nodes, so that each group gets its own pressures.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -45,7 +44,7 @@ import skfem
 
 from ._overlap import boundary_faces
 
-__all__ = ["DEFAULT_GEOMETRY", "UnitMesh", "build_unit_mesh", "build_actuator_mesh", "build_grid_mesh"]
+__all__ = ["DEFAULT_GEOMETRY", "UnitMesh", "build_unit_mesh", "build_actuator_mesh", "build_grid_mesh", "layer_counts"]
 
 #: Table 6 values used by the unit model, mm.
 DEFAULT_GEOMETRY: dict[str, float] = {
@@ -127,17 +126,6 @@ class UnitMesh:
         g = self.geometry
         return g["n_chambers"] * g["depth"] + (g["n_chambers"] - (0 if self.end_gaps else 1)) * g["gap"]
 
-    def write(self, path: str | Path, point_data: Mapping[str, np.ndarray] | None = None) -> Path:
-        """Write the mesh (and optional point data, e.g. displacement) with meshio."""
-        from skfem.io.meshio import to_meshio
-
-        m = to_meshio(self.mesh, point_data=dict(point_data or {}))
-        m.cell_data["material"] = [self.material.astype(np.int32)]
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        m.write(path)
-        return path
-
 
 def _divisions(breaks: np.ndarray, h: float) -> np.ndarray:
     """Grid coordinates through ``breaks`` with intervals of at most about ``h``."""
@@ -195,15 +183,23 @@ def build_grid_mesh(coords: list[np.ndarray], keep=None):
     return mesh, faces, owner
 
 
-def layer_counts(g: Mapping, h: float, paper_layers: int | None = None, base_layers: int | None = None) -> tuple[int, int]:
+def layer_counts(
+    g: Mapping, h: float, paper_layers: int | None = None, base_layers: int | None = None
+) -> tuple[int, int]:
     """Elements through the paper layer and through each base layer (defaults: see the module docstring)."""
     npap = int(paper_layers) if paper_layers else max(1, int(np.ceil(1.0 / h - 1e-9)))
     nbase = int(base_layers) if base_layers else max(1, int(np.ceil(2.0 * g["bot_layer"] / h - 1e-9)))
     return npap, nbase
 
 
-def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, paper_layers: int | None = None,
-                    base_layers: int | None = None, end_gaps: bool = False) -> UnitMesh:
+def build_unit_mesh(
+    geom: Mapping | None = None,
+    h: float = 0.5,
+    dim: int = 2,
+    paper_layers: int | None = None,
+    base_layers: int | None = None,
+    end_gaps: bool = False,
+) -> UnitMesh:
     """Structured mesh of the three-chamber unit.
 
     Parameters
@@ -228,9 +224,14 @@ def build_unit_mesh(geom: Mapping | None = None, h: float = 0.5, dim: int = 2, p
     return _chain_mesh(g, h, dim, layer_counts(g, h, paper_layers, base_layers), None, end_gaps)
 
 
-def build_actuator_mesh(geom: Mapping | None, units_per_group: Mapping[str, int] | Sequence[tuple[str, int]],
-                        h: float = 1.0, dim: int = 2, paper_layers: int | None = None,
-                        base_layers: int | None = None) -> UnitMesh:
+def build_actuator_mesh(
+    geom: Mapping | None,
+    units_per_group: Mapping[str, int] | Sequence[tuple[str, int]],
+    h: float = 1.0,
+    dim: int = 2,
+    paper_layers: int | None = None,
+    base_layers: int | None = None,
+) -> UnitMesh:
     """Structured mesh of the whole actuator: chambers in groups, left to right.
 
     Same geometry, element layout and facet orientation as ``build_unit_mesh``
@@ -255,8 +256,9 @@ def build_actuator_mesh(geom: Mapping | None, units_per_group: Mapping[str, int]
     return _chain_mesh(g, h, dim, layer_counts(g, h, paper_layers, base_layers), names)
 
 
-def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tuple[str, ...] | None,
-                end_gaps: bool = False) -> UnitMesh:
+def _chain_mesh(
+    g: dict, h: float, dim: int, layers: tuple[int, int], groups: tuple[str, ...] | None, end_gaps: bool = False
+) -> UnitMesh:
     """Chain of ``g["n_chambers"]`` chambers; ``groups`` (per chamber) adds the actuator's sets.
 
     ``end_gaps``: the paper and base layers run on by half a gap past both end
@@ -283,8 +285,15 @@ def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tu
     ybr = np.array([-yt, -yp, -yb, -y0, y0, yb, yp, yt])
     xc = _divisions(xb, h)
     npap, nbase = layers
-    yc = np.concatenate([_divisions(ybr[:3], h), np.linspace(-yb, -y0, nbase + 1)[1:], np.linspace(-y0, y0, npap + 1)[1:],
-                         np.linspace(y0, yb, nbase + 1)[1:], _divisions(ybr[5:], h)[1:]])
+    yc = np.concatenate(
+        [
+            _divisions(ybr[:3], h),
+            np.linspace(-yb, -y0, nbase + 1)[1:],
+            np.linspace(-y0, y0, npap + 1)[1:],
+            np.linspace(y0, yb, nbase + 1)[1:],
+            _divisions(ybr[5:], h)[1:],
+        ]
+    )
     coords = [xc, yc]
     if dim == 3:
         zb = np.array([0.0, g["width"] / 2 - ts, g["width"] / 2])
@@ -331,8 +340,11 @@ def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tu
             outer = (np.abs(ys - yt) < tol) & (((mid[0] > a - tf) & (mid[0] < a)) | ((mid[0] > b) & (mid[0] < b + tf)))
             left_outer = outer & (mid[0] < a)
             right_outer = outer & (mid[0] > b)
-            parts = [np.concatenate([facets[f"wall_{side}{k}_left"], faces[left_outer]]), faces[floor],
-                     np.concatenate([facets[f"wall_{side}{k}_right"], faces[right_outer]])]
+            parts = [
+                np.concatenate([facets[f"wall_{side}{k}_left"], faces[left_outer]]),
+                faces[floor],
+                np.concatenate([facets[f"wall_{side}{k}_right"], faces[right_outer]]),
+            ]
             facets[f"gap_{side}{k}"] = np.concatenate(parts)
             part_of[f"gap_{side}{k}"] = np.repeat(np.arange(3), [len(q) for q in parts])
             surfaces.append(f"gap_{side}{k}")
@@ -386,6 +398,16 @@ def _chain_mesh(g: dict, h: float, dim: int, layers: tuple[int, int], groups: tu
                 facets[f"cavity_{side}_{name}"] = faces[sel]
             facets[f"outer_{side}"] = faces[np.abs(ys - yt) < tol]
         nodes["backbone"] = np.flatnonzero(paper)
-    return UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=g, h=float(h), contact_surfaces=surfaces,
-                    chamber_group=tuple(groups or ()), end_gaps=bool(end_gaps), contact_parts=part_of,
-                    _boundary=faces)
+    return UnitMesh(
+        mesh=mesh,
+        material=material,
+        facets=facets,
+        nodes=nodes,
+        geometry=g,
+        h=float(h),
+        contact_surfaces=surfaces,
+        chamber_group=tuple(groups or ()),
+        end_gaps=bool(end_gaps),
+        contact_parts=part_of,
+        _boundary=faces,
+    )

@@ -26,13 +26,23 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["boundary_faces", "overlap_depth", "pocket_sizes", "pocket_names", "overlap_measures"]
+__all__ = [
+    "boundary_faces",
+    "overlap_depth",
+    "pocket_sizes",
+    "pocket_names",
+    "overlap_measures",
+    "QUAD_FACES",
+    "HEX_FACES",
+]
 
 # Faces of a cell as local node lists in cyclic order (scikit-fem's node order of MeshQuad / MeshHex.init_tensor).
 QUAD_FACES = [(0, 1), (1, 2), (2, 3), (3, 0)]
 HEX_FACES = [(0, 2, 4, 1), (3, 5, 7, 6), (0, 1, 5, 3), (2, 6, 7, 4), (0, 3, 6, 2), (1, 4, 7, 5)]
 _XI_QUAD = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], dtype=float)
-_XI_HEX = np.array([(0, 0, 0), (0, 1, 0), (1, 0, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1), (1, 0, 1), (1, 1, 1)], dtype=float)
+_XI_HEX = np.array(
+    [(0, 0, 0), (0, 1, 0), (1, 0, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1), (1, 0, 1), (1, 1, 1)], dtype=float
+)
 
 
 def boundary_faces(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -109,8 +119,9 @@ def _point_face(p: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.min([_point_triangle(p, F[:, i], F[:, (i + 1) % 4], c) for i in range(4)], axis=0)
 
 
-def overlap_depth(x: np.ndarray, t: np.ndarray, faces: np.ndarray | None = None,
-                  ignore: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, int]:
+def overlap_depth(
+    x: np.ndarray, t: np.ndarray, faces: np.ndarray | None = None, ignore: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[float, int]:
     """Deepest boundary node inside an element that does not contain it.
 
     Parameters
@@ -129,7 +140,6 @@ def overlap_depth(x: np.ndarray, t: np.ndarray, faces: np.ndarray | None = None,
     -------
     (depth in mm (0 when no node is inside foreign material), number of such nodes)
     """
-    dim = x.shape[0]
     if faces is None:
         faces, _ = boundary_faces(t)
     bnodes = np.unique(faces)
@@ -194,8 +204,9 @@ def pocket_sizes(x: np.ndarray, pockets: list[np.ndarray], half_model: bool = Tr
 
 def pocket_names(facets) -> list[str]:
     """Names of the per-pocket facet sets ``pocket_{top,bottom}{k}`` of a ``UnitMesh``."""
-    return sorted(k for k in facets if k.startswith("pocket_") and k.rsplit("_", 1)[-1][-1].isdigit()
-                  and k.count("_") == 1)
+    return sorted(
+        k for k in facets if k.startswith("pocket_") and k.rsplit("_", 1)[-1][-1].isdigit() and k.count("_") == 1
+    )
 
 
 def overlap_measures(um, x: np.ndarray, info: dict | None = None, ignore=None) -> dict:
@@ -214,5 +225,9 @@ def overlap_measures(um, x: np.ndarray, info: dict | None = None, ignore=None) -
     names = pocket_names(um.facets)
     sizes = pocket_sizes(x, [um.facets[k] for k in names]) if names else np.array([np.nan])
     key = "min_pocket_area_mm2" if x.shape[0] == 2 else "min_pocket_volume_mm3"
-    return {"contact_penetration_mm": pen, "overlap_depth_mm": depth, "max_penetration_mm": max(pen, depth),
-            key: float(np.min(sizes))}
+    return {
+        "contact_penetration_mm": pen,
+        "overlap_depth_mm": depth,
+        "max_penetration_mm": max(pen, depth),
+        key: float(np.min(sizes)),
+    }

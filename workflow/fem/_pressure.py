@@ -30,7 +30,11 @@ def _skew(a: np.ndarray) -> np.ndarray:
     """Matrix [a]x with [a]x b = a x b, for a of shape (..., 3)."""
     z = np.zeros(a.shape[:-1])
     return np.stack(
-        [np.stack([z, -a[..., 2], a[..., 1]], -1), np.stack([a[..., 2], z, -a[..., 0]], -1), np.stack([-a[..., 1], a[..., 0], z], -1)],
+        [
+            np.stack([z, -a[..., 2], a[..., 1]], -1),
+            np.stack([a[..., 2], z, -a[..., 0]], -1),
+            np.stack([-a[..., 1], a[..., 0], z], -1),
+        ],
         -2,
     )
 

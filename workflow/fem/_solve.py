@@ -25,10 +25,8 @@ from . import _linsolve
 from ._assembly import Pattern, SolidAssembler, vector_dofs
 from ._pressure import pressure_load
 
-__all__ = ["Model", "PathResult", "solve_path", "STATUS_FLAGS", "DEFAULT_SOLVER", "linear_solve"]
+__all__ = ["Model", "PathResult", "solve_path", "DEFAULT_SOLVER", "linear_solve"]
 
-#: CF flag values / meanings of the solver status.
-STATUS_FLAGS = {0: "converged", 1: "step_size_below_minimum", 2: "too_many_steps", 3: "solver_error"}
 
 #: Step control and tolerances (config ``actuator.solver``).
 DEFAULT_SOLVER = {
@@ -84,8 +82,19 @@ class Model:
         solution does not depend on them, only the path of the iterations.
     """
 
-    def __init__(self, solid: SolidAssembler, pressures=None, contacts=(), penalty=0.0, fixed=(), prescribed=None, ties=(),
-                 offsets=None, extras=(), updaters=()):
+    def __init__(
+        self,
+        solid: SolidAssembler,
+        pressures=None,
+        contacts=(),
+        penalty=0.0,
+        fixed=(),
+        prescribed=None,
+        ties=(),
+        offsets=None,
+        extras=(),
+        updaters=(),
+    ):
         self.solid = solid
         self.p0 = solid.mesh_p if hasattr(solid, "mesh_p") else None
         self.pressures = dict(pressures or {})
@@ -148,7 +157,7 @@ class Model:
 
     def positions(self, u: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
         """Current nodal coordinates (dim, nnodes) of the state (or nodal displacements) u."""
-        return p_ref + u[:self.n].reshape(-1, self.solid.dim).T
+        return p_ref + u[: self.n].reshape(-1, self.solid.dim).T
 
     def evaluate(self, u: np.ndarray, lam: float, p_ref: np.ndarray, tangent: bool = True):
         """Nodal residual r = f_int + f_contact - f_ext, tangent (csr, enhanced parameters condensed) and info.
@@ -160,9 +169,9 @@ class Model:
         t0 = time.perf_counter()
         d = self.solid.dim
         f_full, kvals, jmin = self.solid.assemble(u, tangent)
-        f_int = f_full[:self.n]
-        u = u[:self.n]
-        info = {"jmin": jmin, "gmin": np.inf, "r_internal": f_full[self.n:]}
+        f_int = f_full[: self.n]
+        u = u[: self.n]
+        info = {"jmin": jmin, "gmin": np.inf, "r_internal": f_full[self.n :]}
         if not jmin > 0:
             self.timing["assembly_s"] += time.perf_counter() - t0
             return None, None, info
@@ -198,7 +207,9 @@ class Model:
                         cc.append(np.tile(dofs, (1, k)).ravel())
                         cv.append(Kc.ravel())
             if tangent and cr:
-                K = K + sp.csr_matrix((np.concatenate(cv), (np.concatenate(cr), np.concatenate(cc))), shape=(self.n, self.n))
+                K = K + sp.csr_matrix(
+                    (np.concatenate(cv), (np.concatenate(cr), np.concatenate(cc))), shape=(self.n, self.n)
+                )
         info["f_ext_norm"] = float(np.sqrt(f_ext @ f_ext + f_ref2))
         info["r"] = r
         if tangent and self.nstate > self.n:
@@ -233,11 +244,19 @@ def _slope(model: Model, u: np.ndarray, du: np.ndarray, lam: float, p_ref: np.nd
     r, _, info = model.evaluate(model.increment(u, du, p_ref), lam, p_ref, tangent=False)
     if r is None:
         return np.inf
-    return float(du[:model.n] @ r + du[model.n:] @ info["r_internal"])
+    return float(du[: model.n] @ r + du[model.n :] @ info["r_internal"])
 
 
-def _line_search(model: Model, u: np.ndarray, du: np.ndarray, s0: float, lam: float, p_ref: np.ndarray,
-                 ratio: float = 0.5, trials: int = 3) -> np.ndarray:
+def _line_search(
+    model: Model,
+    u: np.ndarray,
+    du: np.ndarray,
+    s0: float,
+    lam: float,
+    p_ref: np.ndarray,
+    ratio: float = 0.5,
+    trials: int = 3,
+) -> np.ndarray:
     """Scale the Newton correction so that the residual's component along it drops.
 
     s(a) = du . r(u + a du); s0 = s(0) < 0 for a descent direction.  The full
@@ -316,8 +335,14 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
     return False, u, opts["max_iter"], "no convergence", info
 
 
-def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, measure: Callable | None = None,
-               u0: np.ndarray | None = None, stops=()) -> PathResult:
+def solve_path(
+    model: Model,
+    p_ref: np.ndarray,
+    options: dict | None = None,
+    measure: Callable | None = None,
+    u0: np.ndarray | None = None,
+    stops=(),
+) -> PathResult:
     """Ramp the load factor from 0 to 1 with adaptive steps.
 
     ``measure(u, lam, info)`` is called after every accepted step (u: the
@@ -365,8 +390,12 @@ def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, mea
         if ok:
             u_prev, u = u, u_new
             lam, dlam_prev = target, target - lam
-            rec = {"lam": lam, "iterations": its, "gmin": info.get("gmin", np.inf),
-                   "wall_time_s": time.perf_counter() - t_start}
+            rec = {
+                "lam": lam,
+                "iterations": its,
+                "gmin": info.get("gmin", np.inf),
+                "wall_time_s": time.perf_counter() - t_start,
+            }
             if measure is not None:
                 rec.update(measure(u, lam, info))
             history.append(rec)
@@ -383,5 +412,15 @@ def solve_path(model: Model, p_ref: np.ndarray, options: dict | None = None, mea
         reason = ""
     timing = dict(model.timing)
     timing["wall_s"] = time.perf_counter() - t_start
-    return PathResult(u=u[:model.n].copy(), lam=lam, status=status, reason=reason, iterations=iters, steps=steps,
-                      cutbacks=cuts, history=history, timing=timing, state=u)
+    return PathResult(
+        u=u[: model.n].copy(),
+        lam=lam,
+        status=status,
+        reason=reason,
+        iterations=iters,
+        steps=steps,
+        cutbacks=cuts,
+        history=history,
+        timing=timing,
+        state=u,
+    )

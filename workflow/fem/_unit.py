@@ -44,7 +44,7 @@ is force-controlled near the free angle, where the unit is softest.
 ``end_hold`` (blocked and rotation) chooses the end nodes held plane:
 ``face`` (``DEFAULT_END_HOLD``) the whole end face, ``backbone`` only the paper
 and base layers (|y| <= 2.1 mm), the blocks' end walls being as free as in
-case *free*.  The default is chosen by evidence (``workflow.unit_moment_check``):
+case *free*.  The default is chosen by evidence (``workflow.actuator.moment_check``):
 against the middle unit of a chain of five chambers under end moments (2D,
 h = 1 mm, 60-180 kPa), the spring theta_f (1 - M / M_b) with the face hold's
 blocked moment has that unit's compliance within 1-9 %, the backbone hold's is
@@ -63,14 +63,32 @@ from typing import Mapping
 
 import numpy as np
 
-from ._assembly import PAPER, SILICONE, SolidAssembler
+from workflow.fem._assembly import PAPER, SILICONE
+
+from ._assembly import SolidAssembler
 from ._contact import contact_pairs_from_mesh
 from ._mesh import UnitMesh, build_unit_mesh
 from ._overlap import overlap_measures
 from ._solve import DEFAULT_SOLVER, Model, solve_path
 
-__all__ = ["DEFAULT_MATERIAL", "DEFAULT_CONTACT", "CASES", "END_HOLDS", "material_constants", "UnitResult", "solve_unit",
-           "unit_model", "held_end_nodes", "clamp_rotation", "clamp_inclination_deg"]
+__all__ = [
+    "DEFAULT_MATERIAL",
+    "DEFAULT_CONTACT",
+    "CASES",
+    "END_HOLDS",
+    "material_constants",
+    "UnitResult",
+    "solve_unit",
+    "unit_model",
+    "held_end_nodes",
+    "clamp_rotation",
+    "clamp_inclination_deg",
+    "contact_penalty",
+    "DEFAULT_END_HOLD",
+    "FORMULATIONS",
+    "DEFAULT_FORMULATION",
+    "solid_assembler",
+]
 
 #: Table 5 Mooney-Rivlin constants of Smooth-Sil 950 (MPa; C10 = 260,567.62, C01 = 97,549.81,
 #: C20 = 57,500.69 Pa, mu0 = 0.716 MPa), bulk modulus ratio K/mu0, paper layer (section 2.3).
@@ -85,8 +103,13 @@ DEFAULT_MATERIAL = {
 
 #: Penalty self-contact: eps = penalty_factor * mu0 / penalty_length_mm (MPa/mm), the same on every
 #: mesh (a contact pressure p_c gives a penetration p_c / eps: mu0 gives 0.01 mm); search distance, mm.
-DEFAULT_CONTACT = {"penalty_factor": 100.0, "penalty_length_mm": 1.0, "search_mm": 1.0, "extend": 0.5,
-                   "smoothing_mm": 0.01}
+DEFAULT_CONTACT = {
+    "penalty_factor": 100.0,
+    "penalty_length_mm": 1.0,
+    "search_mm": 1.0,
+    "extend": 0.5,
+    "smoothing_mm": 0.01,
+}
 
 
 def contact_penalty(mat: Mapping, contact: Mapping) -> float:
@@ -220,9 +243,18 @@ def clamp_rotation(um: UnitMesh, angle_deg: float) -> dict:
     return out
 
 
-def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", contact: bool = True,
-               material: Mapping | None = None, contact_options: Mapping | None = None, formulation: str = DEFAULT_FORMULATION,
-               end_angle_deg: float = 0.0, end_hold: str = DEFAULT_END_HOLD) -> Model:
+def unit_model(
+    um: UnitMesh,
+    p_top_kpa: float,
+    p_bottom_kpa: float,
+    case: str = "free",
+    contact: bool = True,
+    material: Mapping | None = None,
+    contact_options: Mapping | None = None,
+    formulation: str = DEFAULT_FORMULATION,
+    end_angle_deg: float = 0.0,
+    end_hold: str = DEFAULT_END_HOLD,
+) -> Model:
     """The ``Model`` of the unit (pressures in MPa at load factor 1).
 
     ``end_angle_deg`` (deg, total over the unit, + = P_T sense) is used by
@@ -248,8 +280,15 @@ def unit_model(um: UnitMesh, p_top_kpa: float, p_bottom_kpa: float, case: str = 
     copts = dict(DEFAULT_CONTACT)
     copts.update(dict(contact_options or {}))
     pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["extend"], copts["smoothing_mm"]) if contact else []
-    return Model(solid, pressures=pressures, contacts=pairs, penalty=contact_penalty(mat, copts), fixed=fixed,
-                 prescribed=prescribed, ties=ties)
+    return Model(
+        solid,
+        pressures=pressures,
+        contacts=pairs,
+        penalty=contact_penalty(mat, copts),
+        fixed=fixed,
+        prescribed=prescribed,
+        ties=ties,
+    )
 
 
 def clamp_inclination_deg(end_angle_deg: float, lam: float) -> float:
@@ -262,8 +301,15 @@ def clamp_inclination_deg(end_angle_deg: float, lam: float) -> float:
     return float(np.degrees(np.arctan2(lam * np.sin(t), 1.0 - lam + lam * np.cos(t))))
 
 
-def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_bottom_kpa: float,
-                     end_angle_deg: float = 0.0, end_hold: str = DEFAULT_END_HOLD):
+def _measure_factory(
+    um: UnitMesh,
+    model: Model,
+    case: str,
+    p_top_kpa: float,
+    p_bottom_kpa: float,
+    end_angle_deg: float = 0.0,
+    end_hold: str = DEFAULT_END_HOLD,
+):
     p_ref = um.mesh.p
     dim = um.dim
     n = int(um.geometry["n_chambers"])
@@ -275,7 +321,9 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
         a = x[:, um.nodes["backbone_end"]].mean(axis=1)
         b = x[:, um.nodes["backbone_prev"]].mean(axis=1)
         # the clamp of case rotation is turned by -end_angle: angles are relative to it
-        end_angle = clamp_inclination_deg(end_angle_deg, lam) if case == "rotation" else (0.0 if case == "blocked" else np.nan)
+        end_angle = (
+            clamp_inclination_deg(end_angle_deg, lam) if case == "rotation" else (0.0 if case == "blocked" else np.nan)
+        )
         total = -np.degrees(np.arctan2(a[1] - b[1], a[0] - b[0])) + (end_angle if case == "rotation" else 0.0)
         moment = np.nan
         if case in ("blocked", "rotation") and info.get("r") is not None:
@@ -297,10 +345,22 @@ def _measure_factory(um: UnitMesh, model: Model, case: str, p_top_kpa: float, p_
     return measure
 
 
-def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", contact: bool = True, *,
-               material: Mapping | None = None, contact_options: Mapping | None = None,
-               solver: Mapping | None = None, formulation: str = DEFAULT_FORMULATION, keep_displacement: bool = False,
-               stops=(), end_angle_deg: float = 0.0, end_hold: str = DEFAULT_END_HOLD) -> UnitResult:
+def solve_unit(
+    mesh_or_params,
+    p_top_kpa: float,
+    p_bottom_kpa: float,
+    case: str = "free",
+    contact: bool = True,
+    *,
+    material: Mapping | None = None,
+    contact_options: Mapping | None = None,
+    solver: Mapping | None = None,
+    formulation: str = DEFAULT_FORMULATION,
+    keep_displacement: bool = False,
+    stops=(),
+    end_angle_deg: float = 0.0,
+    end_hold: str = DEFAULT_END_HOLD,
+) -> UnitResult:
     """Solve the unit model from zero to (p_top_kpa, p_bottom_kpa) and measure it.
 
     Parameters
@@ -342,25 +402,53 @@ def solve_unit(mesh_or_params, p_top_kpa: float, p_bottom_kpa: float, case: str 
         um = mesh_or_params
     else:
         prm = dict(mesh_or_params)
-        um = build_unit_mesh(prm.get("geometry"), h=prm["h"], dim=prm["dim"], paper_layers=prm.get("paper_layers"),
-                             base_layers=prm.get("base_layers"))
-    model = unit_model(um, p_top_kpa, p_bottom_kpa, case, contact, material, contact_options, formulation, end_angle_deg,
-                       end_hold)
+        um = build_unit_mesh(
+            prm.get("geometry"),
+            h=prm["h"],
+            dim=prm["dim"],
+            paper_layers=prm.get("paper_layers"),
+            base_layers=prm.get("base_layers"),
+        )
+    model = unit_model(
+        um, p_top_kpa, p_bottom_kpa, case, contact, material, contact_options, formulation, end_angle_deg, end_hold
+    )
     measure = _measure_factory(um, model, case, p_top_kpa, p_bottom_kpa, end_angle_deg, end_hold)
     opts = dict(DEFAULT_SOLVER)
     opts.update(dict(solver or {}))
     res = solve_path(model, um.mesh.p, opts, measure, stops=tuple(stops))
-    last = res.history[-1] if res.history else {
-        "bending_angle_total_deg": 0.0, "bending_angle_deg": 0.0, "bending_moment_nm": 0.0 if case == "blocked" else np.nan,
-        "end_angle_deg": 0.0 if case == "blocked" else np.nan, "max_penetration_mm": 0.0}
+    last = (
+        res.history[-1]
+        if res.history
+        else {
+            "bending_angle_total_deg": 0.0,
+            "bending_angle_deg": 0.0,
+            "bending_moment_nm": 0.0 if case == "blocked" else np.nan,
+            "end_angle_deg": 0.0 if case == "blocked" else np.nan,
+            "max_penetration_mm": 0.0,
+        }
+    )
     pen = max([h["max_penetration_mm"] for h in res.history], default=0.0)
     return UnitResult(
-        dim=um.dim, case=case, contact=bool(contact), p_top_kpa=float(p_top_kpa), p_bottom_kpa=float(p_bottom_kpa),
-        status=res.status, reason=res.reason, load_factor=res.lam,
-        bending_angle_deg=last["bending_angle_deg"], bending_angle_total_deg=last["bending_angle_total_deg"],
-        bending_moment_nm=last["bending_moment_nm"], max_penetration_mm=pen,
-        newton_iterations=res.iterations, steps=res.steps, cutbacks=res.cutbacks,
-        wall_time_s=time.perf_counter() - t0, assembly_time_s=res.timing["assembly_s"], solve_time_s=res.timing["solve_s"],
-        ndofs=model.n, end_angle_deg=last["end_angle_deg"], history=res.history,
+        dim=um.dim,
+        case=case,
+        contact=bool(contact),
+        p_top_kpa=float(p_top_kpa),
+        p_bottom_kpa=float(p_bottom_kpa),
+        status=res.status,
+        reason=res.reason,
+        load_factor=res.lam,
+        bending_angle_deg=last["bending_angle_deg"],
+        bending_angle_total_deg=last["bending_angle_total_deg"],
+        bending_moment_nm=last["bending_moment_nm"],
+        max_penetration_mm=pen,
+        newton_iterations=res.iterations,
+        steps=res.steps,
+        cutbacks=res.cutbacks,
+        wall_time_s=time.perf_counter() - t0,
+        assembly_time_s=res.timing["assembly_s"],
+        solve_time_s=res.timing["solve_s"],
+        ndofs=model.n,
+        end_angle_deg=last["end_angle_deg"],
+        history=res.history,
         displacement=res.u if keep_displacement else None,
     )

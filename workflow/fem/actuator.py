@@ -21,14 +21,26 @@ from typing import Mapping
 
 import numpy as np
 
-from ._contact import contact_pairs_from_mesh
-from ._mesh import UnitMesh
-from ._overlap import overlap_measures
-from ._solve import DEFAULT_SOLVER, Model, solve_path
-from ._unit import DEFAULT_CONTACT, DEFAULT_FORMULATION, contact_penalty, material_constants, solid_assembler
+from workflow.fem._contact import contact_pairs_from_mesh
+from workflow.fem._mesh import UnitMesh
+from workflow.fem._overlap import overlap_measures
+from workflow.fem._solve import DEFAULT_SOLVER, Model, solve_path
+from workflow.fem._unit import (
+    DEFAULT_CONTACT,
+    DEFAULT_FORMULATION,
+    contact_penalty,
+    material_constants,
+    solid_assembler,
+)
 
-__all__ = ["group_pressures", "actuator_model", "backbone_curve", "tip_angle_deg", "StandaloneResult",
-           "solve_standalone"]
+__all__ = [
+    "group_pressures",
+    "actuator_model",
+    "backbone_curve",
+    "tip_angle_deg",
+    "StandaloneResult",
+    "solve_standalone",
+]
 
 
 def group_pressures(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float]], node_offset: int = 0) -> dict:
@@ -45,9 +57,15 @@ def group_pressures(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float
     return out
 
 
-def actuator_model(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float]], *, material: Mapping | None = None,
-                   contact_options: Mapping | None = None, contact: bool = True,
-                   formulation: str = DEFAULT_FORMULATION) -> Model:
+def actuator_model(
+    um: UnitMesh,
+    pressures_kpa: Mapping[str, tuple[float, float]],
+    *,
+    material: Mapping | None = None,
+    contact_options: Mapping | None = None,
+    contact: bool = True,
+    formulation: str = DEFAULT_FORMULATION,
+) -> Model:
     """Stand-alone whole actuator: clamped hand end, group pressures at load factor 1."""
     mat = material_constants(material)
     solid = solid_assembler(um.mesh, um.material, mat, formulation)
@@ -58,8 +76,13 @@ def actuator_model(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float]
     copts = dict(DEFAULT_CONTACT)
     copts.update(dict(contact_options or {}))
     pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["extend"], copts["smoothing_mm"]) if contact else []
-    return Model(solid, pressures=group_pressures(um, pressures_kpa), contacts=pairs,
-                 penalty=contact_penalty(mat, copts), fixed=np.unique(np.concatenate(fixed)))
+    return Model(
+        solid,
+        pressures=group_pressures(um, pressures_kpa),
+        contacts=pairs,
+        penalty=contact_penalty(mat, copts),
+        fixed=np.unique(np.concatenate(fixed)),
+    )
 
 
 def backbone_curve(x: np.ndarray, p_ref: np.ndarray, backbone_nodes: np.ndarray) -> np.ndarray:
@@ -97,13 +120,22 @@ class StandaloneResult:
     displacement: np.ndarray | None = field(default=None, repr=False)
 
 
-def solve_standalone(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float]], *, material: Mapping | None = None,
-                     contact_options: Mapping | None = None, contact: bool = True, solver: Mapping | None = None,
-                     keep_displacement: bool = False, formulation: str = DEFAULT_FORMULATION) -> StandaloneResult:
+def solve_standalone(
+    um: UnitMesh,
+    pressures_kpa: Mapping[str, tuple[float, float]],
+    *,
+    material: Mapping | None = None,
+    contact_options: Mapping | None = None,
+    contact: bool = True,
+    solver: Mapping | None = None,
+    keep_displacement: bool = False,
+    formulation: str = DEFAULT_FORMULATION,
+) -> StandaloneResult:
     """Ramp the group pressures from zero on the clamped actuator; never raises for a failed path."""
     t0 = time.perf_counter()
-    model = actuator_model(um, pressures_kpa, material=material, contact_options=contact_options, contact=contact,
-                           formulation=formulation)
+    model = actuator_model(
+        um, pressures_kpa, material=material, contact_options=contact_options, contact=contact, formulation=formulation
+    )
     opts = dict(DEFAULT_SOLVER)
     opts.update(dict(solver or {}))
     p_ref = um.mesh.p
@@ -113,10 +145,19 @@ def solve_standalone(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, floa
     curve = backbone_curve(x, p_ref, bb)
     pocket = "min_pocket_area_mm2" if um.dim == 2 else "min_pocket_volume_mm3"
     return StandaloneResult(
-        dim=um.dim, status=res.status, reason=res.reason, load_factor=res.lam, tip_angle_deg=tip_angle_deg(curve),
-        backbone_mm=curve, backbone_ref_mm=backbone_curve(p_ref, p_ref, bb), newton_iterations=res.iterations,
-        steps=res.steps, wall_time_s=time.perf_counter() - t0, ndofs=model.n,
+        dim=um.dim,
+        status=res.status,
+        reason=res.reason,
+        load_factor=res.lam,
+        tip_angle_deg=tip_angle_deg(curve),
+        backbone_mm=curve,
+        backbone_ref_mm=backbone_curve(p_ref, p_ref, bb),
+        newton_iterations=res.iterations,
+        steps=res.steps,
+        wall_time_s=time.perf_counter() - t0,
+        ndofs=model.n,
         max_penetration_mm=max([h["max_penetration_mm"] for h in res.history], default=0.0),
         overlap_depth_mm=max([h["overlap_depth_mm"] for h in res.history], default=0.0),
         min_pocket=min([h[pocket] for h in res.history], default=np.nan),
-        displacement=res.u if keep_displacement else None)
+        displacement=res.u if keep_displacement else None,
+    )

@@ -41,19 +41,37 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import skfem
 
-from ._actuator import backbone_curve, group_pressures, tip_angle_deg
-from ._assembly import SolidAssembler
-from ._contact import ContactPair, contact_pairs_from_mesh
-from ._finger2d import BONE, FLESH, DeadLoad, StrapSpring, DofSpring, FingerMesh, HingeSpring, RigidRotationUpdate
-from ._mesh import UnitMesh
-from ._overlap import overlap_measures
-from ._solve import DEFAULT_SOLVER, Model, solve_path
-from ._unit import DEFAULT_CONTACT, DEFAULT_FORMULATION, contact_penalty, solid_assembler
+from workflow.fem._assembly import SolidAssembler
+from workflow.fem._contact import ContactPair, contact_pairs_from_mesh
+from workflow.fem._mesh import UnitMesh
+from workflow.fem._overlap import overlap_measures
+from workflow.fem._solve import DEFAULT_SOLVER, Model, solve_path
+from workflow.fem._unit import DEFAULT_CONTACT, DEFAULT_FORMULATION, contact_penalty, solid_assembler
+from workflow.fem.actuator import backbone_curve, group_pressures, tip_angle_deg
+from workflow.fem.finger2d import (
+    BONE,
+    FLESH,
+    DeadLoad,
+    DofSpring,
+    FingerMesh,
+    HingeSpring,
+    RigidRotationUpdate,
+    StrapSpring,
+)
 
-__all__ = ["CoupledMesh", "couple_meshes", "cell_areas", "nodal_body_force", "CoupledSetup", "coupled_model",
-           "CoupledResult", "solve_coupled", "JOINTS"]
+from ..common.constants import JOINTS
 
-JOINTS = ("MCP", "PIP", "DIP")
+__all__ = [
+    "CoupledMesh",
+    "couple_meshes",
+    "cell_areas",
+    "nodal_body_force",
+    "CoupledSetup",
+    "coupled_model",
+    "CoupledResult",
+    "solve_coupled",
+    "segment_rotation_update",
+]
 
 
 @dataclass
@@ -91,9 +109,17 @@ def couple_meshes(act: UnitMesh, offset: Sequence[float], finger: FingerMesh) ->
     facets = dict(act.facets)
     facets.update({f"finger_{k}": v + n_act for k, v in finger.facets.items()})
     nodes = dict(act.nodes)
-    um = UnitMesh(mesh=mesh, material=material, facets=facets, nodes=nodes, geometry=act.geometry, h=act.h,
-                  contact_surfaces=list(act.contact_surfaces), contact_parts=dict(act.contact_parts),
-                  chamber_group=act.chamber_group)
+    um = UnitMesh(
+        mesh=mesh,
+        material=material,
+        facets=facets,
+        nodes=nodes,
+        geometry=act.geometry,
+        h=act.h,
+        contact_surfaces=list(act.contact_surfaces),
+        contact_parts=dict(act.contact_parts),
+        chamber_group=act.chamber_group,
+    )
     return CoupledMesh(mesh=mesh, material=material, body=body, act=act, offset=off, n_act=n_act, finger=finger, um=um)
 
 
@@ -155,7 +181,9 @@ def _strap_anchor(cm: CoupledMesh, joint_node: int) -> int:
     return int(cand[np.argmin(np.abs(p[0, cand] - p[0, joint_node]))])
 
 
-def segment_rotation_update(cm: CoupledMesh, actuator: bool = False, blend_mm: float | None = None) -> RigidRotationUpdate:
+def segment_rotation_update(
+    cm: CoupledMesh, actuator: bool = False, blend_mm: float | None = None
+) -> RigidRotationUpdate:
     """Finite-rotation Newton update of the three finger segments (see ``RigidRotationUpdate``).
 
     Segment k turns about its proximal joint-centre node (MCP, PIP, DIP), fitted
@@ -196,7 +224,9 @@ def segment_rotation_update(cm: CoupledMesh, actuator: bool = False, blend_mm: f
     return RigidRotationUpdate(groups, blend=(an, W))
 
 
-def coupled_model(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, float]], gravity_ramp: bool) -> tuple[Model, dict]:
+def coupled_model(
+    setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, float]], gravity_ramp: bool
+) -> tuple[Model, dict]:
     """The ``Model`` at the given group pressures (kPa); gravity ramped with lam or held.
 
     Returns the model and its parts (``hinges``, ``straps``, ``slide``) for measurements.
@@ -230,11 +260,20 @@ def coupled_model(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, 
     pairs = contact_pairs_from_mesh(cm.um, c["search_mm"], c["extend"], c["smoothing_mm"])
     skin, bottom = cm.um.facets["finger_dorsal"], cm.um.facets["outer_bottom"]
     fac = float(c["finger_penalty"]) / eps  # own penalty (see the module docstring)
-    finger_pairs = [ContactPair(p, skin, bottom, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
-                    ContactPair(p, bottom, skin, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac)]
-    model = Model(setup.solid, pressures=group_pressures(cm.act, pressures_kpa) if pressures_kpa else {},
-                  contacts=pairs + finger_pairs, penalty=eps, fixed=np.unique(np.concatenate([np.ravel(f) for f in fixed])),
-                  ties=ties, extras=extras, updaters=[segment_rotation_update(cm)] if setup.rigid_update else [])
+    finger_pairs = [
+        ContactPair(p, skin, bottom, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
+        ContactPair(p, bottom, skin, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
+    ]
+    model = Model(
+        setup.solid,
+        pressures=group_pressures(cm.act, pressures_kpa) if pressures_kpa else {},
+        contacts=pairs + finger_pairs,
+        penalty=eps,
+        fixed=np.unique(np.concatenate([np.ravel(f) for f in fixed])),
+        ties=ties,
+        extras=extras,
+        updaters=[segment_rotation_update(cm)] if setup.rigid_update else [],
+    )
     return model, {"hinges": hinges, "straps": straps, "slide": slide, "finger_pairs": finger_pairs}
 
 
@@ -309,11 +348,17 @@ def _measure(setup, model, parts, p_ref, lam_g):
             "overlap_depth_mm": checks["overlap_depth_mm"],
             "min_pocket_area_mm2": checks["min_pocket_area_mm2"],
         }
+
     return measure
 
 
-def solve_coupled(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, float]], *,
-                  solver: Mapping | None = None, u_gravity: np.ndarray | None = None) -> CoupledResult:
+def solve_coupled(
+    setup: CoupledSetup,
+    pressures_kpa: Mapping[str, tuple[float, float]],
+    *,
+    solver: Mapping | None = None,
+    u_gravity: np.ndarray | None = None,
+) -> CoupledResult:
     """Gravity first (ramped alone), then the group pressures ramped from zero with gravity held.
 
     ``u_gravity``: a converged gravity state (``CoupledResult.state``) to start the pressure phase from
@@ -359,13 +404,31 @@ def solve_coupled(setup: CoupledSetup, pressures_kpa: Mapping[str, tuple[float, 
     pocket = min([h["min_pocket_area_mm2"] for h in history], default=np.nan)
     curve = backbone_curve(x, p_ref, cm.um.nodes["backbone"])
     return CoupledResult(
-        status=status, reason=reason, phase=phase, load_factor=lam, joint_angles_deg=np.degrees(th),
-        droop_angles_deg=droop, spring_moments=sm, gravity_moments=_gravity_moments(setup, x, lam_g),
-        strap_forces=strap, max_strap_force=max_strap, max_spring_moments=max_sm,
-        slide_force=float(parts["slide"].force(u)[0]), max_penetration_mm=pen, overlap_depth_mm=overlap,
-        min_pocket_area_mm2=pocket, tip_angle_deg=tip_angle_deg(curve),
-        backbone_mm=curve, newton_iterations=iters, steps=steps, wall_time_s=time.perf_counter() - t0,
-        ndofs=model.n, history=history, u=u[:model.n].copy(), state=u)
+        status=status,
+        reason=reason,
+        phase=phase,
+        load_factor=lam,
+        joint_angles_deg=np.degrees(th),
+        droop_angles_deg=droop,
+        spring_moments=sm,
+        gravity_moments=_gravity_moments(setup, x, lam_g),
+        strap_forces=strap,
+        max_strap_force=max_strap,
+        max_spring_moments=max_sm,
+        slide_force=float(parts["slide"].force(u)[0]),
+        max_penetration_mm=pen,
+        overlap_depth_mm=overlap,
+        min_pocket_area_mm2=pocket,
+        tip_angle_deg=tip_angle_deg(curve),
+        backbone_mm=curve,
+        newton_iterations=iters,
+        steps=steps,
+        wall_time_s=time.perf_counter() - t0,
+        ndofs=model.n,
+        history=history,
+        u=u[: model.n].copy(),
+        state=u,
+    )
 
 
 __all__ += ["FLESH", "BONE"]

@@ -14,7 +14,7 @@ Hinge springs.  A segment's orientation is that of the chord between two of
 its bone nodes (the joint-centre nodes; for the distal phalanx the bone's
 distal-most centre node).  Bone (E = 20 GPa) keeps that chord rigid, so the
 joint angle theta = -(phi_distal - phi_proximal) (flexion positive, the
-``workflow.finger`` frame) follows from node positions alone, and a passive
+``workflow.cascade.finger`` frame) follows from node positions alone, and a passive
 moment M(theta) enters as the energy  int M dtheta  with its exact gradient
 and Hessian (``HingeSpring``).
 
@@ -26,6 +26,8 @@ ground (a numerical regularisation of a rigid-body mode, see its docstring).
 All objects follow ``Model``'s ``extras`` protocol: ``evaluate(x, u, lam,
 tangent) -> (f (n,), K (n, n) sparse or None)``, f added to the residual
 (internal-force sign).  Units: mm, N (per mm of width in 2D), N mm, rad.
+
+Over 400 lines: the finger's mesh and the springs, straps and dead loads acting on it are one model; split, each half would need the other's node bookkeeping.
 """
 
 from __future__ import annotations
@@ -36,10 +38,19 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from ._mesh import _divisions, _orient
+from workflow.fem._mesh import _divisions, _orient
 
-__all__ = ["FLESH", "BONE", "SegmentProfile", "FingerMesh", "build_finger_mesh", "HingeSpring", "StrapSpring",
-           "DeadLoad", "DofSpring", "chord_angle", "RigidRotationUpdate"]
+__all__ = [
+    "SegmentProfile",
+    "FingerMesh",
+    "build_finger_mesh",
+    "HingeSpring",
+    "StrapSpring",
+    "DeadLoad",
+    "DofSpring",
+    "chord_angle",
+    "RigidRotationUpdate",
+]
 
 #: Material ids of the finger in ``SolidAssembler`` (0/1 are silicone/paper).
 FLESH, BONE = 2, 3
@@ -159,16 +170,26 @@ def build_finger_mesh(profiles: Sequence[SegmentProfile], h: float = 1.5, min_ba
     seg_all = np.concatenate(segs)
     facets = {}
     for k, d in enumerate(dorsal):
-        top_cells = np.flatnonzero(seg_all == k)[-d.shape[0]:]  # the top row, left to right like d
+        top_cells = np.flatnonzero(seg_all == k)[-d.shape[0] :]  # the top row, left to right like d
         facets[f"dorsal_{k}"] = _orient(p, d, centroids[:, top_cells])
     facets["dorsal"] = np.concatenate([facets[f"dorsal_{k}"] for k in range(3)])
     j = {"MCP": final[first[0]], "PIP": final[last[0]], "DIP": final[last[1]]}
     nodes = {f"joint_{n}": int(v) for n, v in j.items()}
     nodes["dp_end"] = int(final[dp_end])
-    chords = [(nodes["joint_MCP"], nodes["joint_PIP"]), (nodes["joint_PIP"], nodes["joint_DIP"]),
-              (nodes["joint_DIP"], nodes["dp_end"])]
-    return FingerMesh(p=p, t=t.astype(np.int64), material=np.concatenate(mats), segment=np.concatenate(segs),
-                      facets=facets, nodes=nodes, chords=chords)
+    chords = [
+        (nodes["joint_MCP"], nodes["joint_PIP"]),
+        (nodes["joint_PIP"], nodes["joint_DIP"]),
+        (nodes["joint_DIP"], nodes["dp_end"]),
+    ]
+    return FingerMesh(
+        p=p,
+        t=t.astype(np.int64),
+        material=np.concatenate(mats),
+        segment=np.concatenate(segs),
+        facets=facets,
+        nodes=nodes,
+        chords=chords,
+    )
 
 
 # --------------------------------------------------------------------------
@@ -201,8 +222,15 @@ class HingeSpring:
     moment : callable theta (rad) -> M (N mm per mm of width); ``stiffness`` -> dM/dtheta
     """
 
-    def __init__(self, ndofs: int, p_ref: np.ndarray, chord_a, chord_b, moment: Callable[[float], float],
-                 stiffness: Callable[[float], float]):
+    def __init__(
+        self,
+        ndofs: int,
+        p_ref: np.ndarray,
+        chord_a,
+        chord_b,
+        moment: Callable[[float], float],
+        stiffness: Callable[[float], float],
+    ):
         self.n = ndofs
         self.a, self.b = chord_a, chord_b
         self.moment, self.stiffness = moment, stiffness

@@ -60,8 +60,9 @@ def mooney_rivlin_mode_stress(c10_mpa: float, c01_mpa: float, c20_mpa: float, st
     return sigma, sigma / lam
 
 
-def drucker_instabilities(c10_mpa: float, c01_mpa: float, c20_mpa: float, *, span=(0.3, 3.0),
-                          required=(0.5, 2.0), n: int = 2701) -> list[Instability]:
+def drucker_instabilities(
+    c10_mpa: float, c01_mpa: float, c20_mpa: float, *, span=(0.3, 3.0), required=(0.5, 2.0), n: int = 2701
+) -> list[Instability]:
     """Per mode, the stretches in ``span`` where the law is unstable (empty list: stable throughout).
 
     ``within`` marks an instability that reaches into ``required`` (the

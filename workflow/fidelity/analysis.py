@@ -1,7 +1,7 @@
 """Speed against accuracy, and the cheapest fidelity that meets a tolerance.
 
 Pure functions on small tables; the FE solves, surrogate fits and OpenSim
-samples that feed them live in :mod:`workflow.fidelity_run`.
+samples that feed them are run by :mod:`workflow.fidelity.entry`.
 
 Vocabulary
 ----------
@@ -35,30 +35,25 @@ from typing import Mapping, Sequence
 import numpy as np
 import xarray as xr
 
-from workflow.fem_study import FemCase, case_actuator, fem_cases  # noqa: F401 - part of this module's API
-
 __all__ = [
+    "METHOD_GROUPS",
+    "group_errors",
     "UNIT_QUANTITIES",
-    "FemCase",
-    "fem_cases",
     "unit_quantities",
     "relative_errors",
     "Richardson",
     "richardson",
     "pareto_front",
     "speed_accuracy_dataset",
-    "Choice",
-    "cheapest_within",
-    "case_actuator",
-    "apply_fem_choice",
-    "check_choice",
 ]
 
 #: The unit quantities of the FE and surrogate methods (P_B = 0).
 UNIT_QUANTITIES = tuple(f"{q}_{p}" for q in ("angle", "moment") for p in (60, 180, 300))
 
 
-def unit_quantities(angle_deg: Sequence[float], moment_nm: Sequence[float], p_top_kpa: Sequence[float]) -> dict[str, float]:
+def unit_quantities(
+    angle_deg: Sequence[float], moment_nm: Sequence[float], p_top_kpa: Sequence[float]
+) -> dict[str, float]:
     """{``angle_60``: ..., ``moment_300``: ...} from values at the study pressures (NaN where not reached)."""
     out = {q: np.nan for q in UNIT_QUANTITIES}
     for a, m, p in zip(angle_deg, moment_nm, p_top_kpa):
@@ -139,11 +134,20 @@ def pareto_front(wall_time_s: np.ndarray, error: np.ndarray) -> np.ndarray:
     return front
 
 
-def speed_accuracy_dataset(methods: Sequence[str], quantities: Sequence[str], wall_time_s: Sequence[float],
-                           error: np.ndarray, *, family: Sequence[str], error_units: Mapping[str, str],
-                           reference: Mapping[str, str], value: np.ndarray | None = None,
-                           setup_time_s: Sequence[float] | None = None, front_group: Sequence[str] | None = None,
-                           notes: Mapping[str, str] | None = None) -> xr.Dataset:
+def speed_accuracy_dataset(
+    methods: Sequence[str],
+    quantities: Sequence[str],
+    wall_time_s: Sequence[float],
+    error: np.ndarray,
+    *,
+    family: Sequence[str],
+    error_units: Mapping[str, str],
+    reference: Mapping[str, str],
+    value: np.ndarray | None = None,
+    setup_time_s: Sequence[float] | None = None,
+    front_group: Sequence[str] | None = None,
+    notes: Mapping[str, str] | None = None,
+) -> xr.Dataset:
     """The contract's ``speed_accuracy.nc``: ``wall_time_s`` (method), ``error`` and ``pareto`` (method, quantity).
 
     ``error_units`` / ``reference``: per quantity, the error's unit and the
@@ -164,106 +168,66 @@ def speed_accuracy_dataset(methods: Sequence[str], quantities: Sequence[str], wa
     ds = xr.Dataset(
         {
             "wall_time_s": ("method", t, {"units": "s", "long_name": "wall time of the method for its quantities"}),
-            "error": (("method", "quantity"), err, {"units": "see error_units", "long_name": "error against the quantity's reference"}),
-            "pareto": (("method", "quantity"), par, {"units": "1", "long_name": "on the speed-accuracy Pareto front of the quantity"}),
-            "family": ("method", np.array(list(family), dtype=object), {"units": "1", "long_name": "stage and kind of the method"}),
+            "error": (
+                ("method", "quantity"),
+                err,
+                {"units": "see error_units", "long_name": "error against the quantity's reference"},
+            ),
+            "pareto": (
+                ("method", "quantity"),
+                par,
+                {"units": "1", "long_name": "on the speed-accuracy Pareto front of the quantity"},
+            ),
+            "family": (
+                "method",
+                np.array(list(family), dtype=object),
+                {"units": "1", "long_name": "stage and kind of the method"},
+            ),
             "front_group": ("method", grp, {"units": "1", "long_name": "methods that share a Pareto front"}),
-            "error_units": ("quantity", np.array([error_units[q] for q in quantities], dtype=object), {"units": "1", "long_name": "unit of the error (1 = relative)"}),
-            "reference_method": ("quantity", np.array([reference.get(q, "") for q in quantities], dtype=object), {"units": "1", "long_name": "method taken as the reference"}),
+            "error_units": (
+                "quantity",
+                np.array([error_units[q] for q in quantities], dtype=object),
+                {"units": "1", "long_name": "unit of the error (1 = relative)"},
+            ),
+            "reference_method": (
+                "quantity",
+                np.array([reference.get(q, "") for q in quantities], dtype=object),
+                {"units": "1", "long_name": "method taken as the reference"},
+            ),
         },
         coords={"method": list(methods), "quantity": list(quantities)},
     )
     if value is not None:
-        ds["value"] = (("method", "quantity"), np.asarray(value, float), {"units": "mixed", "long_name": "the compared value (deg, N m, kPa RMS, deg)"})
+        ds["value"] = (
+            ("method", "quantity"),
+            np.asarray(value, float),
+            {"units": "mixed", "long_name": "the compared value (deg, N m, kPa RMS, deg)"},
+        )
     if setup_time_s is not None:
-        ds["setup_time_s"] = ("method", np.asarray(setup_time_s, float), {"units": "s", "long_name": "one-off cost behind the method (e.g. a surrogate's sweep and fit)"})
+        ds["setup_time_s"] = (
+            "method",
+            np.asarray(setup_time_s, float),
+            {"units": "s", "long_name": "one-off cost behind the method (e.g. a surrogate's sweep and fit)"},
+        )
     ds.attrs.update({k: str(v) for k, v in dict(notes or {}).items()})
     return ds
 
 
-@dataclass
-class Choice:
-    """The fidelity picked for one stage, and why."""
-
-    stage: str
-    method: str
-    reason: str
-    error: float
-    wall_time_s: float
-    met_tolerance: bool
-
-
-def cheapest_within(stage: str, methods: Sequence[str], wall_time_s: Sequence[float], error: Sequence[float],
-                    tolerance: float, *, converged: Sequence[bool] | None = None, unit: str = "") -> Choice:
-    """The cheapest converged method whose error (its largest over the stage's quantities) is within ``tolerance``.
-
-    If none is, the most accurate converged one, said so.  ``error`` NaN
-    counts as unknown: such a method is only taken when it is the reference
-    (error 0 is expected there) -- callers pass 0 for the reference.
-    """
-    t = np.asarray(wall_time_s, float)
-    e = np.asarray(error, float)
-    ok = np.ones(t.size, bool) if converged is None else np.asarray(converged, bool)
-    within = ok & np.isfinite(e) & (e <= tolerance)
-    u = f" {unit}" if unit and unit != "1" else ""
-    fmt = (lambda x: f"{x:.3g}{u}") if u else (lambda x: f"{100 * x:.2f} %")
-    if within.any():
-        i = int(np.flatnonzero(within)[np.argmin(t[within])])
-        faster = ok & (t < t[i])
-        why = (f"{methods[i]}: the cheapest ({t[i]:.3g} s) within {fmt(tolerance)} (its error {fmt(e[i])})"
-               + (f"; faster but outside: {', '.join(f'{methods[k]} {fmt(e[k])}' for k in np.flatnonzero(faster))}"
-                  if faster.any() else ""))
-        return Choice(stage, methods[i], why, float(e[i]), float(t[i]), True)
-    cand = ok & np.isfinite(e)
-    if not cand.any():
-        raise ValueError(f"{stage}: no converged method with a known error to choose from")
-    i = int(np.flatnonzero(cand)[np.argmin(e[cand])])
-    return Choice(stage, methods[i], f"{methods[i]}: no method within {fmt(tolerance)}; the most accurate "
-                  f"converged one taken (error {fmt(e[i])}, {t[i]:.3g} s)", float(e[i]), float(t[i]), False)
+#: Quantity groups of the speed-accuracy study (one plot panel, one report column each): title, quantity prefix, error label.
+METHOD_GROUPS = (
+    ("unit free angle (60/180/300 kPa)", "angle_", "largest relative error"),
+    ("unit blocked moment (60/180/300 kPa)", "moment_", "largest relative error"),
+    ("surrogates on held-out FE samples (5-fold CV)", "cv_", "largest RMSE / std"),
+    ("planned pressures (TGE1-5)", "plan_", "largest RMS difference (kPa)"),
+    ("FEA check joint angles", "check_", "largest joint error (deg)"),
+    ("joint moments (test patients in the design region)", "msk_", "largest relative error"),
+)
 
 
-def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -> tuple[dict, dict]:
-    """(``actuator`` config with the chosen mesh and contact for ``model``, the fidelity attrs to record).
-
-    ``choice``: the FE study's choice (``results/fidelity/fem.nc``); without it
-    (``fidelity.auto`` off) the config's own mesh is used and said so.
-    """
-    act = dict(actuator)
-    if choice is None:
-        h_cfg = dict(act.get("mesh", {})).get(f"h_{model}_mm")
-        return act, {"fidelity": "config", "fidelity_reason": f"actuator.mesh.h_{model}_mm = {h_cfg} (fidelity.auto off)"}
-    if model not in [str(m) for m in choice["model_choice"].values]:
-        h_cfg = dict(act.get("mesh", {})).get(f"h_{model}_mm")
-        return act, {"fidelity": "config", "fidelity_reason": f"actuator.mesh.h_{model}_mm = {h_cfg} (no {model} case in "
-                     "fidelity.fem_cases)"}
-    row = choice.sel(model_choice=model)
-    case = FemCase(model, float(row["chosen_h_mm"]), bool(row["chosen_contact"]))
-    return case_actuator(act, case), {"fidelity": case.name, "fidelity_reason": str(row["choice_reason"].values)}
-
-
-def check_choice(study: xr.Dataset | None, tolerance_deg: float, h_config_mm: float,
-                 penetration_bound_mm: float = np.inf) -> tuple[float, str]:
-    """(element size, why) for the FEA check: the cheapest mesh whose joint angles (every exercise of the
-    study) are within ``tolerance_deg`` of the finest converged one's (the config's without a study),
-    among the meshes whose contact penetration stays within ``penetration_bound_mm``.
-
-    ``study``: the dataset of :func:`workflow.fidelity_run.write_check_study`.
-    """
-    if study is None:
-        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g} (fidelity.auto off)"
-    c = study
-    hs = c["h_mm"].values
-    ang = c["angle_deg"].values  # (h, exercise, joint)
-    ok = np.all(c["status"].values == 0, axis=1)
-    if "max_penetration_mm" in c:  # a mesh whose contact penetrates beyond the bound is not a valid check
-        ok &= ~np.any(c["max_penetration_mm"].values > penetration_bound_mm, axis=1)
-    wall = np.nanmean(c["wall_time_s"].values, axis=1)
-    ex = ", ".join(str(e) for e in c["exercise"].values)
-    if not ok.any():
-        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g}: no mesh of the check study qualified"
-    r = int(np.flatnonzero(ok)[np.argmin(hs[ok])])
-    err = np.where(ok, np.max(np.abs(ang - ang[r]), axis=(1, 2)), np.nan)
-    ch = cheapest_within("fea_check", [f"check_h{h:g}" for h in hs], wall, err, tolerance_deg, converged=ok,
-                         unit="deg")
-    pen = "" if not np.isfinite(penetration_bound_mm) else f", penetration <= {penetration_bound_mm:g} mm"
-    return float(hs[[f"check_h{h:g}" for h in hs].index(ch.method)]), f"{ch.reason} (study: {ex}, finest h = {hs[r]:g} mm{pen})"
+def group_errors(ds: xr.Dataset, prefix: str) -> xr.DataArray:
+    """Per method, the largest error over the quantities starting with ``prefix`` (NaN if it has none)."""
+    q = [str(x) for x in ds["quantity"].values if str(x).startswith(prefix)]
+    if not q:
+        return xr.full_like(ds["wall_time_s"], np.nan)
+    e = ds["error"].sel(quantity=q)
+    return e.max("quantity", skipna=True).where(e.notnull().any("quantity"))

@@ -1,6 +1,6 @@
 """File-level entry points of the fidelity stage.
 
-* :func:`write_fem_choice` -- the FE unit cases (:mod:`workflow.fem_study`) against the finest converged one of
+* :func:`write_fem_choice` -- the FE unit cases (:mod:`workflow.fidelity.entry_fem`) against the finest converged one of
   their model, and the cheapest case per model within the tolerance (what the
   sweeps and the unit check then use when ``fidelity.auto`` is on);
 * :func:`write_msk_study` -- response surfaces against direct OpenSim
@@ -23,84 +23,36 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import xarray as xr
 
-from workflow import fidelity as FD
-from workflow.fem_study import P_STUDY
-from workflow.provenance import open_result, write_dataset
-from workflow.runlog import solved
+from workflow.actuator.surrogates import fit_surrogate
+from workflow.actuator.unit_model import UnitModel
+from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
+from workflow.cascade.planning import plan_patient
+from workflow.common import fidelity_choice
+from workflow.common.fidelity_choice import P_STUDY
+from workflow.common.provenance import open_result, write_dataset
+from workflow.common.runlog import solved
+from workflow.doe import ccd as doe
+from workflow.doe.entry import design_from_ccd
+from workflow.fidelity import analysis as FD
+from workflow.fidelity.plots import plot_speed_accuracy
+from workflow.fidelity.tables import _model_cases, _msk_quantities, _reference_values, fem_table
+from workflow.musculoskeletal import rsm
+from workflow.musculoskeletal.direct import direct_responses
+from workflow.musculoskeletal.moments import responses_from_moments
 
-__all__ = ["fem_table", "write_fem_choice", "write_msk_study",
-           "write_check_study", "write_speed_accuracy"]
+__all__ = ["write_fem_choice", "write_msk_study", "write_speed_accuracy"]
 
 log = logging.getLogger(__name__)
 
 
-
-# --------------------------------------------------------------------------
-# FE unit: one case, the table, the choice
-# --------------------------------------------------------------------------
-def fem_table(cases: Sequence[xr.Dataset]) -> xr.Dataset:
-    """The cases on one table (case, quantity) with errors against each model's converged value.
-
-    Reference per model and quantity: the generalised Richardson extrapolation
-    (`workflow.fidelity.richardson`) from the three finest meshes *with
-    contact* that reached that point, when they converge monotonically with an
-    observed order in [0.5, 6]; otherwise the finest of them (contact is part
-    of the physics; cases without it are compared with it).  ``error`` =
-    relative error; NaN where the case did not reach the point or, without an
-    extrapolation, is finer than the reference.
-    """
-    names = [str(c.attrs["case"]) for c in cases]
-    parsed = [FD.FemCase.parse(n) for n in names]
-    vals = np.full((len(cases), len(FD.UNIT_QUANTITIES)), np.nan)
-    for i, c in enumerate(cases):
-        q = FD.unit_quantities(c["bending_angle_deg"].values, c["bending_moment_nm"].values, c["p_top_kpa"].values)
-        vals[i] = [q[k] for k in FD.UNIT_QUANTITIES]
-    err = np.full_like(vals, np.nan)
-    ref_name = np.full(vals.shape, "", dtype=object)
-    ref_val, order, gci = np.full(vals.shape, np.nan), np.full(vals.shape, np.nan), np.full(vals.shape, np.nan)
-    for model in sorted({c.model for c in parsed}):
-        rows = [i for i, c in enumerate(parsed) if c.model == model]
-        for j in range(vals.shape[1]):
-            cands = sorted([i for i in rows if parsed[i].contact and np.isfinite(vals[i, j])], key=lambda i: parsed[i].h_mm)
-            if not cands:
-                continue
-            r = cands[0]
-            rich = FD.richardson([parsed[i].h_mm for i in cands[:3]], vals[cands[:3], j]) if len(cands) >= 3 else None
-            extrapolated = rich is not None and rich.asymptotic
-            ref = rich.limit if extrapolated else vals[r, j]
-            label = ("richardson(" + ", ".join(f"{parsed[i].h_mm:g}" for i in cands[:3]) + " mm)") if extrapolated else names[r]
-            for i in rows:
-                ref_name[i, j], ref_val[i, j] = label, ref
-                if rich is not None:
-                    order[i, j], gci[i, j] = rich.order, rich.gci_fine
-                if i == r and not extrapolated:
-                    err[i, j] = 0.0
-                elif not extrapolated and parsed[i].contact and parsed[i].h_mm <= parsed[r].h_mm:
-                    continue  # a finer case the reference could not be compared with
-                else:
-                    err[i, j] = FD.relative_errors(vals[i, j], ref)
-    wall = np.array([float(c["case_wall_time_s"]) for c in cases])
-    conv = np.array([bool(np.all(c["status"].values == 0)) for c in cases])
-    return xr.Dataset(
-        {
-            "value": (("case", "quantity"), vals, {"units": "deg or N m", "long_name": "free angle per unit (angle_*) / blocked moment per unit (moment_*), P_B = 0"}),
-            "error": (("case", "quantity"), err, {"units": "1", "long_name": "relative error against the model's finest converged case with contact"}),
-            "reference_case": (("case", "quantity"), ref_name, {"units": "1", "long_name": "reference: Richardson extrapolation from three meshes, or the finest case"}),
-            "reference_value": (("case", "quantity"), ref_val, {"units": "deg or N m", "long_name": "reference value of the model and quantity"}),
-            "observed_order": (("case", "quantity"), order, {"units": "1", "long_name": "observed order of convergence of the three finest meshes with contact"}),
-            "gci_fine": (("case", "quantity"), gci, {"units": "1", "long_name": "grid convergence index of the finest mesh (Celik et al. 2008, safety factor 1.25)"}),
-            "wall_time_s": ("case", wall, {"units": "s", "long_name": "wall time of the case (free and blocked rays)"}),
-            "converged": ("case", conv, {"units": "1", "long_name": "every study point reached in both rays"}),
-            "model": ("case", np.array([c.model for c in parsed], dtype=object), {"units": "1", "long_name": "2d or 3d"}),
-            "h_mm": ("case", np.array([c.h_mm for c in parsed]), {"units": "mm", "long_name": "element size"}),
-            "contact": ("case", np.array([c.contact for c in parsed]), {"units": "1", "long_name": "self-contact across the gaps"}),
-        },
-        coords={"case": names, "quantity": list(FD.UNIT_QUANTITIES)},
-    )
-
-
-def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, tolerance: float | Mapping[str, float],
-                     config_slice: Any, rule: str = "fidelity_fem_choice") -> xr.Dataset:
+def write_fem_choice(
+    case_files: Sequence[str | Path],
+    out: str | Path,
+    *,
+    tolerance: float | Mapping[str, float],
+    config_slice: Any,
+    rule: str = "fidelity_fem_choice",
+) -> xr.Dataset:
     """Rule ``fidelity_fem_choice``: the table and, per model, the cheapest case within ``tolerance``.
 
     ``tolerance``: one relative bound, or ``{"angle": ..., "moment": ...}``
@@ -110,8 +62,11 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
     """
     table = fem_table([open_result(f) for f in case_files])
     tol = tolerance if isinstance(tolerance, Mapping) else {"angle": float(tolerance), "moment": float(tolerance)}
-    bound = xr.DataArray([float(tol[str(q).split("_")[0]]) for q in table["quantity"].values], dims="quantity",
-                         coords={"quantity": table["quantity"].values})
+    bound = xr.DataArray(
+        [float(tol[str(q).split("_")[0]]) for q in table["quantity"].values],
+        dims="quantity",
+        coords={"quantity": table["quantity"].values},
+    )
     models = sorted(set(table["model"].values.tolist()))
     chosen, reason, h, contact, met = [], [], [], [], []
     for model in models:
@@ -121,63 +76,82 @@ def write_fem_choice(case_files: Sequence[str | Path], out: str | Path, *, toler
         # contact is part of the physics: cases without it are comparisons, never a choice
         conv = sel["converged"].values.astype(bool) & sel["contact"].values.astype(bool)
         try:
-            ch = FD.cheapest_within(f"fem_{model}", names, sel["wall_time_s"].values, worst, 1.0, converged=conv,
-                                    unit="x the tolerance")
+            ch = fidelity_choice.cheapest_within(
+                f"fem_{model}", names, sel["wall_time_s"].values, worst, 1.0, converged=conv, unit="x the tolerance"
+            )
         except ValueError:
             # no case with contact reached every point: the finest with contact is used (its sweeps
             # record each failed sample's status), and the choice says so
             withc = [n for n, c in zip(names, sel["contact"].values) if bool(c)] or names
-            fine = min(withc, key=lambda n: FD.FemCase.parse(n).h_mm)
-            ch = FD.Choice(f"fem_{model}", fine, f"{fine}: no case with contact reached every study point; the finest "
-                           "with contact taken", float("nan"), float(sel["wall_time_s"].sel(case=fine)), False)
+            fine = min(withc, key=lambda n: fidelity_choice.FemCase.parse(n).h_mm)
+            ch = fidelity_choice.Choice(
+                f"fem_{model}",
+                fine,
+                f"{fine}: no case with contact reached every study point; the finest with contact taken",
+                float("nan"),
+                float(sel["wall_time_s"].sel(case=fine)),
+                False,
+            )
             log.warning("FE %s: no case with contact reached every study point; %s taken", model, fine)
-        case = FD.FemCase.parse(ch.method)
+        case = fidelity_choice.FemCase.parse(ch.method)
         e = sel["error"].sel(case=ch.method)
         ea = float(e.sel(quantity=[q for q in e["quantity"].values if str(q).startswith("angle")]).max())
         em = float(e.sel(quantity=[q for q in e["quantity"].values if str(q).startswith("moment")]).max())
         chosen.append(ch.method)
-        reason.append(f"{ch.reason}; its largest errors: free angle {100 * ea:.1f} % (tolerance "
-                      f"{100 * tol['angle']:g} %), blocked moment {100 * em:.1f} % (tolerance {100 * tol['moment']:g} %)")
+        reason.append(
+            f"{ch.reason}; its largest errors: free angle {100 * ea:.1f} % (tolerance "
+            f"{100 * tol['angle']:g} %), blocked moment {100 * em:.1f} % (tolerance {100 * tol['moment']:g} %)"
+        )
         h.append(case.h_mm)
         contact.append(case.contact)
         met.append(ch.met_tolerance)
         log.info("FE %s: %s", model, reason[-1])
     ds = table.assign(
-        chosen_case=("model_choice", np.array(chosen, dtype=object), {"units": "1", "long_name": "FE case the sweeps and the unit check use"}),
+        chosen_case=(
+            "model_choice",
+            np.array(chosen, dtype=object),
+            {"units": "1", "long_name": "FE case the sweeps and the unit check use"},
+        ),
         chosen_h_mm=("model_choice", np.array(h), {"units": "mm", "long_name": "chosen element size"}),
         chosen_contact=("model_choice", np.array(contact), {"units": "1", "long_name": "chosen contact switch"}),
         choice_reason=("model_choice", np.array(reason, dtype=object), {"units": "1", "long_name": "why this case"}),
-        tolerance_met=("model_choice", np.array(met), {"units": "1", "long_name": "the chosen case is within the tolerance"}),
+        tolerance_met=(
+            "model_choice",
+            np.array(met),
+            {"units": "1", "long_name": "the chosen case is within the tolerance"},
+        ),
     ).assign_coords(model_choice=models)
     ds.attrs["tolerance_angle"] = float(tol["angle"])
     ds.attrs["tolerance_moment"] = float(tol["moment"])
-    ds.attrs["rule_of_choice"] = ("cheapest converged case whose relative errors of the unit's free angle and blocked "
-                                  "moment at P_T = 60/180/300 kPa are within their tolerances (error / tolerance <= 1)")
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title="FE unit fidelities: speed and error per element size and contact, and the choice")
+    ds.attrs["rule_of_choice"] = (
+        "cheapest converged case whose relative errors of the unit's free angle and blocked "
+        "moment at P_T = 60/180/300 kPa are within their tolerances (error / tolerance <= 1)"
+    )
+    write_dataset(
+        ds,
+        out,
+        rule=rule,
+        config_slice=config_slice,
+        title="FE unit fidelities: speed and error per element size and contact, and the choice",
+    )
     return ds
 
 
-# --------------------------------------------------------------------------
-# Musculoskeletal: response surfaces against direct OpenSim sampling
-# --------------------------------------------------------------------------
-def _msk_quantities(exercises: Mapping[str, Mapping[str, float]], finger: str) -> list[tuple[str, str, str, str, float]]:
-    """(quantity, response name, kind P/A, joint, angle) for every passive target and active limit."""
-    from workflow.musculoskeletal.moments import ACTIVATIONS, JOINTS, response_angles, response_name
-
-    out = []
-    angles = response_angles(exercises)
-    for kind in ("P", "A"):
-        for joint in JOINTS:
-            for a in angles[kind][joint]:
-                out.append((f"{'passive' if kind == 'P' else 'active'}_{joint}_{a:g}",
-                            response_name(finger, ACTIVATIONS[kind], joint, a), kind, joint, float(a)))
-    return out
-
-
-def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: str, model_osim: str | None,
-                    points: Sequence[Mapping[str, float]], exercises: Mapping, scaling_cfg: Mapping,
-                    anthropometry: Mapping, finger: str, config_slice: Any, rule: str = "fidelity_msk") -> xr.Dataset:
+def write_msk_study(
+    out: str | Path,
+    *,
+    ccd_nc: str,
+    moments_nc: str,
+    rsm_nc: str,
+    model_osim: str | None,
+    points: Sequence[Mapping[str, float]],
+    exercises: Mapping,
+    scaling_cfg: Mapping,
+    anthropometry: Mapping,
+    finger: str,
+    config_slice: Any,
+    rule: str = "fidelity_msk",
+) -> xr.Dataset:
     """Rule ``fidelity_msk``: each RSM form, and the selected one per response, against direct sampling.
 
     At test patients given by coded levels, inside and outside the design
@@ -186,10 +160,6 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
     timed and no error can be given (said so in the dataset and the log).
     Errors compare magnitudes (the active moments' sign is a backend convention).
     """
-    from workflow import doe
-    from workflow.musculoskeletal import rsm
-    from workflow.musculoskeletal.moments import responses_from_moments
-    from workflow.pipeline import design_from_ccd
 
     design = design_from_ccd(ccd_nc)
     responses = responses_from_moments(open_result(moments_nc), exercises)
@@ -205,8 +175,10 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
     setup = np.zeros(len(methods))
     for m, form in enumerate(forms + ["selected"]):
         t0 = time.perf_counter()  # the surfaces are fitted once (the rsm rule's job), then queried per patient
-        fits = [rsm.fit_response(design, responses[resp], selected[resp] if form == "selected" else form)
-                for _, resp, *_rest in quants]
+        fits = [
+            rsm.fit_response(design, responses[resp], selected[resp] if form == "selected" else form)
+            for _, resp, *_rest in quants
+        ]
         setup[m] = time.perf_counter() - t0
         for i, x in enumerate(pts):
             t0 = time.perf_counter()
@@ -214,16 +186,20 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
             wall[m, i] = time.perf_counter() - t0
     note = "direct OpenSim sampling at each test patient (reference)"
     if model_osim:
-        from workflow.musculoskeletal.direct import direct_responses
-
         for i, x in enumerate(pts):
             t0 = time.perf_counter()
-            d = direct_responses(model_osim, x, exercises, finger=finger, scaling_cfg=scaling_cfg,
-                                 anthropometry=anthropometry)
+            d = direct_responses(
+                model_osim, x, exercises, finger=finger, scaling_cfg=scaling_cfg, anthropometry=anthropometry
+            )
             vals[-1, i] = [d[kind, joint, a] for _, _, kind, joint, a in quants]
             wall[-1, i] = time.perf_counter() - t0
-            log.info("direct OpenSim at %s: %d responses, %.2f s", x, len(quants), wall[-1, i],
-                     extra=solved(int(np.sum(~np.isfinite(vals[-1, i]))), n=len(quants)))
+            log.info(
+                "direct OpenSim at %s: %d responses, %.2f s",
+                x,
+                len(quants),
+                wall[-1, i],
+                extra=solved(int(np.sum(~np.isfinite(vals[-1, i]))), n=len(quants)),
+            )
     else:
         note = "no OpenSim model (table backend): direct sampling not available, errors unknown"
         log.warning("fidelity_msk: %s", note)
@@ -232,158 +208,83 @@ def write_msk_study(out: str | Path, *, ccd_nc: str, moments_nc: str, rsm_nc: st
     inside = norm <= 1 + 1e-9
     ds = xr.Dataset(
         {
-            "moment_nm": (("method", "point", "quantity"), vals, {"units": "N m", "long_name": "joint moment at the target angle"}),
-            "rel_error": (("method", "point", "quantity"), err, {"units": "1", "long_name": "relative error of the magnitude against direct sampling"}),
-            "wall_time_s": (("method", "point"), wall, {"units": "s", "long_name": "time to give one patient's moments (RSM: predict with intervals; OpenSim: scale + sample)"}),
-            "setup_time_s": ("method", setup, {"units": "s", "long_name": "one-off cost (RSM: fitting the surfaces; OpenSim: 0, the model build is the CCD's)"}),
-            "coded": (("point", "dimension"), np.array([[p[k] for k in doe.FACTORS] for p in pts]), {"units": "1", "long_name": "coded levels of the test patient"}),
+            "moment_nm": (
+                ("method", "point", "quantity"),
+                vals,
+                {"units": "N m", "long_name": "joint moment at the target angle"},
+            ),
+            "rel_error": (
+                ("method", "point", "quantity"),
+                err,
+                {"units": "1", "long_name": "relative error of the magnitude against direct sampling"},
+            ),
+            "wall_time_s": (
+                ("method", "point"),
+                wall,
+                {
+                    "units": "s",
+                    "long_name": "time to give one patient's moments (RSM: predict with intervals; OpenSim: scale + sample)",
+                },
+            ),
+            "setup_time_s": (
+                "method",
+                setup,
+                {
+                    "units": "s",
+                    "long_name": "one-off cost (RSM: fitting the surfaces; OpenSim: 0, the model build is the CCD's)",
+                },
+            ),
+            "coded": (
+                ("point", "dimension"),
+                np.array([[p[k] for k in doe.FACTORS] for p in pts]),
+                {"units": "1", "long_name": "coded levels of the test patient"},
+            ),
             "coded_norm": ("point", norm, {"units": "1", "long_name": "||x|| of the test patient"}),
             "inside_design": ("point", inside, {"units": "1", "long_name": "||x|| <= 1"}),
         },
-        coords={"method": methods, "point": np.arange(len(pts)), "quantity": [q[0] for q in quants],
-                "dimension": list(doe.FACTORS)},
+        coords={
+            "method": methods,
+            "point": np.arange(len(pts)),
+            "quantity": [q[0] for q in quants],
+            "dimension": list(doe.FACTORS),
+        },
     )
     ds.attrs.update({"finger": finger, "reference": "msk_opensim", "note": note})
     for m in methods[:-1]:
         e = ds["rel_error"].sel({"method": m})
-        log.info("%s: largest relative error inside %.3g, outside %.3g", m,
-                 float(e.where(ds["inside_design"]).max()), float(e.where(~ds["inside_design"]).max()))
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title="Response surfaces against direct OpenSim sampling at test patients")
-    return ds
-
-
-# --------------------------------------------------------------------------
-# The FEA check at several meshes, against the reduced-order chains
-# --------------------------------------------------------------------------
-def write_check_study(out: str | Path, *, exercises: Sequence[str], h_mm: Sequence[float], patient_name: str,
-                      patient: Mapping, plan_nc: str, joint_loads_nc: str, moments_nc: str, ccd_nc: str,
-                      surrogate_2d: str, surrogate_3d: str, fea_cfg: Mapping, actuator_cfg: Mapping,
-                      cascade_cfg: Mapping, anthropometry: Mapping, unit_model_cfg: Mapping, config_slice: Any,
-                      rule: str = "fidelity_check") -> xr.Dataset:
-    """Rule ``fidelity_check``: the FEA check of ``exercises`` at each element size (actuator = finger h).
-
-    Per mesh and exercise: joint angles, wall time (the mesh's gravity phase
-    shared out over its exercises, plus the pressure phase), DOFs, status and
-    contact penetration; the chains' predictions (the plan's and the 2D
-    unit's at the applied pressures) with their time as the cheap stand-ins.
-    """
-    from workflow.cascade import patient_cascade, patient_finger, solve_equilibrium
-    from workflow.fea_check import applied_limit, check_exercise, gravity_state, load_surrogate_angles, pressures_2d
-    from workflow.fea_model import build_patient_fea
-    from workflow.finger import JOINTS
-    from workflow.unit_model import load_unit_model
-
-    plan = open_result(plan_nc)
-    loads = open_result(joint_loads_nc)
-    finger, _ = patient_finger(patient, loads, open_result(moments_nc), open_result(ccd_nc),
-                               cascade_cfg=cascade_cfg, anthropometry=anthropometry)
-    upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
-    a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d)
-    ex = [str(e) for e in exercises]
-    p3 = plan["pressure_kpa"].sel(exercise=ex).values
-    p2, _ = pressures_2d(p3, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
-    solver = dict(actuator_cfg.get("solver", {}))
-    solver.update(dict(fea_cfg.get("solver", {})))
-    hs = sorted((float(h) for h in h_mm), reverse=True)
-    shape = (len(hs), len(ex))
-    ang = np.full(shape + (3,), np.nan)
-    wall, pen = np.full(shape, np.nan), np.full(shape, np.nan)
-    ndofs, status = np.zeros(len(hs), dtype="i4"), np.zeros(shape, dtype="i1")
-    for i, h in enumerate(hs):
-        t0 = time.perf_counter()
-        fea = build_patient_fea(finger, upg, actuator_cfg=actuator_cfg, cascade_cfg=cascade_cfg,
-                                reference_dims_mm={k: float(v["mean"]) for k, v in anthropometry["measures"].items()},
-                                fea_cfg=dict(fea_cfg, h_actuator_mm=h, h_finger_mm=h))
-        grav = gravity_state(fea, solver)
-        t_grav = (time.perf_counter() - t0) / len(ex)
-        ndofs[i] = grav.ndofs
-        for k, e in enumerate(ex):
-            if grav.status != 0:
-                ang[i, k], status[i, k], wall[i, k] = grav.joint_angles_deg, max(1, grav.status), t_grav
-                continue
-            c = check_exercise(fea, e, p2[k], solver, gravity=grav)
-            ang[i, k], status[i, k] = c.angle_deg, c.result.status
-            wall[i, k], pen[i, k] = t_grav + c.wall_time_s, c.result.max_penetration_mm
-            log.info("check %s at h = %g mm (%d dofs): %s deg, status %d, %.1f s, penetration %.3f mm", e, h,
-                     ndofs[i], np.round(ang[i, k], 2), status[i, k], wall[i, k], pen[i, k],
-                     extra=solved(status[i, k] != 0))
-    chains = {}
-    plan_unit = {"2d": surrogate_2d, "3d": surrogate_3d}[cascade_cfg.get("surrogate", "3d")]
-    for name, path, p in (("check_chain_plan", plan_unit, p3), ("check_chain_2d", surrogate_2d, p2)):
-        ro = patient_cascade(finger, load_unit_model(path, **unit_model_cfg), cascade_cfg, upg)
-        out_ang, out_t = [], []
-        for k in range(len(ex)):
-            t0 = time.perf_counter()
-            out_ang.append(solve_equilibrium(ro, np.asarray(p[k]).ravel()).joint_angles_deg)
-            out_t.append(time.perf_counter() - t0)
-        chains[name] = (np.array(out_ang), np.array(out_t))
-    ds = xr.Dataset(
-        {
-            "angle_deg": (("h_mm", "exercise", "joint"), ang, {"units": "degree", "long_name": "joint angle reached in the FEA check"}),
-            "wall_time_s": (("h_mm", "exercise"), wall, {"units": "s", "long_name": "pressure phase plus the mesh's model build and gravity phase shared over its exercises"}),
-            "ndofs": ("h_mm", ndofs, {"units": "1", "long_name": "degrees of freedom"}),
-            "status": (("h_mm", "exercise"), status, {"units": "1", "long_name": "solver status (0 = converged)"}),
-            "max_penetration_mm": (("h_mm", "exercise"), pen, {"units": "mm", "long_name": "largest contact penetration along the load path"}),
-            "chain_angle_deg": (("chain", "exercise", "joint"), np.array([v[0] for v in chains.values()]), {"units": "degree", "long_name": "reduced-order chain's joint angle"}),
-            "chain_wall_time_s": (("chain", "exercise"), np.array([v[1] for v in chains.values()]), {"units": "s", "long_name": "time of the chain's equilibrium"}),
-            "pressure_2d_kpa": (("exercise", "group", "chamber"), p2, {"units": "kPa", "long_name": "pressures applied in 2D"}),
-        },
-        coords={"h_mm": hs, "exercise": ex, "joint": list(JOINTS), "chain": list(chains), "group": plan["group"].values,
-                "chamber": plan["chamber"].values},
+        log.info(
+            "%s: largest relative error inside %.3g, outside %.3g",
+            m,
+            float(e.where(ds["inside_design"]).max()),
+            float(e.where(~ds["inside_design"]).max()),
+        )
+    write_dataset(
+        ds,
+        out,
+        rule=rule,
+        config_slice=config_slice,
+        title="Response surfaces against direct OpenSim sampling at test patients",
     )
-    ds.attrs.update({"exercises": " ".join(ex), "patient": patient_name})
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title=f"FEA check of {', '.join(ex)} by element size, patient {patient_name}")
     return ds
 
 
-# --------------------------------------------------------------------------
-# Everything on one table
-# --------------------------------------------------------------------------
-def _model_cases(table: xr.Dataset, model: str) -> xr.Dataset:
-    """The FE table's rows of one model (2d / 3d)."""
-    return table.isel(case=np.flatnonzero(table["model"].values == model))
-
-
-def _reference_values(fem: xr.Dataset, model: str) -> dict[str, float]:
-    """Per unit quantity, the value of the model's reference case (the one with error 0)."""
-    sel = _model_cases(fem, model)
-    out = {}
-    for q in FD.UNIT_QUANTITIES:
-        r = np.flatnonzero(sel["error"].sel(quantity=q).values == 0.0)
-        out[q] = float(sel["value"].sel(quantity=q).values[r[0]]) if r.size else np.nan
-    return out
-
-
-def _surrogate_rows(responses: Mapping[str, str], fem: xr.Dataset, surrogates_cfg: Mapping, cv: xr.Dataset):
-    """Every regressor of each sweep, fitted on all its samples, at the unit study points."""
-    from workflow.surrogates import fit_surrogate
-
-    rows = []
-    for fea, path in responses.items():
-        resp = open_result(path)
-        sweep_time = float(resp["wall_time_s"].sum())
-        ref = _reference_values(fem, fea)
-        for reg in [str(r) for r in cv["regressor"].values]:
-            t0 = time.perf_counter()
-            s = fit_surrogate(resp, reg, fea=fea, k=int(surrogates_cfg["k"]), random_state=int(surrogates_cfg["random_state"]))
-            fit_t = time.perf_counter() - t0
-            p = np.array(P_STUDY)
-            t1 = time.perf_counter()
-            a, m = s.angle_deg(p, 0.0 * p), s.moment_nm(p, 0.0 * p)
-            q_t = time.perf_counter() - t1
-            rows.append((f"surrogate_{fea}_{reg}", f"surrogate_{fea}", FD.unit_quantities(a, m, p), q_t,
-                         sweep_time + fit_t, ref, s))
-    return rows
-
-
-def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_nc: str, responses: Mapping[str, str],
-                         cv_nc: str, msk_nc: str | None, check_nc: str | None, plan_inputs: Mapping | None,
-                         surrogates_cfg: Mapping, config_slice: Any, rule: str = "speed_accuracy") -> xr.Dataset:
+def write_speed_accuracy(
+    out_nc: str | Path,
+    out_png: str | Path | None,
+    *,
+    fem_nc: str,
+    responses: Mapping[str, str],
+    cv_nc: str,
+    msk_nc: str | None,
+    check_nc: str | None,
+    plan_inputs: Mapping | None,
+    surrogates_cfg: Mapping,
+    config_slice: Any,
+    rule: str = "speed_accuracy",
+) -> xr.Dataset:
     """Rule ``speed_accuracy``: every fidelity on one (method, quantity) table, Pareto fronts, chart.
 
-    Quantities and references (see :mod:`workflow.fidelity`): the unit's six
+    Quantities and references (see :mod:`workflow.fidelity.analysis`): the unit's six
     (reference: the finest converged FE case with contact of the same model;
     surrogates are compared with it too, so their error includes the mesh
     error of the sweep they learnt from); ``cv_angle`` / ``cv_moment``
@@ -435,13 +336,16 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             cells[name, f"cv_{t}"] = (float(c["rmse"].mean("fold")), nrmse)
 
     if plan_inputs:
-        from workflow.cascade import patient_cascade, patient_finger, plan_limit, plan_options, plan_patient
-        from workflow.unit_model import UnitModel
-
         pi = plan_inputs
         loads = open_result(pi["joint_loads"])
-        finger, _ = patient_finger(pi["patient"], loads, open_result(pi["moments"]), open_result(pi["ccd"]),
-                                   cascade_cfg=pi["cascade"], anthropometry=pi["anthropometry"])
+        finger, _ = patient_finger(
+            pi["patient"],
+            loads,
+            open_result(pi["moments"]),
+            open_result(pi["ccd"]),
+            cascade_cfg=pi["cascade"],
+            anthropometry=pi["anthropometry"],
+        )
         c = pi["cascade"]
         targets = {str(e): loads["target_angle_deg"].sel(exercise=e).values for e in loads["exercise"].values}
         plan_fea = c.get("surrogate", "3d")
@@ -468,8 +372,10 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             refs[q] = best[0].replace("surrogate_", "plan_")
             for name in plans:
                 d = plans[name][e] - plans[best[0]][e]
-                cells[name.replace("surrogate_", "plan_"), q] = (float(np.sqrt(np.mean(plans[name][e] ** 2))),
-                                                                 float(np.sqrt(np.mean(d**2))))
+                cells[name.replace("surrogate_", "plan_"), q] = (
+                    float(np.sqrt(np.mean(plans[name][e] ** 2))),
+                    float(np.sqrt(np.mean(d**2))),
+                )
 
     if check_nc:
         chk = open_result(check_nc)
@@ -484,11 +390,15 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             refs[q] = f"check_h{hs[r]:g}" if r is not None else ""
             ref_ang = c["angle_deg"].values[r] if r is not None else np.full(3, np.nan)
             for i, h in enumerate(hs):
-                cells[f"check_h{h:g}", q] = (float(c["angle_deg"].values[i, 0]),
-                                             float(np.max(np.abs(c["angle_deg"].values[i] - ref_ang))) if ok[i] else np.nan)
+                cells[f"check_h{h:g}", q] = (
+                    float(c["angle_deg"].values[i, 0]),
+                    float(np.max(np.abs(c["angle_deg"].values[i] - ref_ang))) if ok[i] else np.nan,
+                )
             for k, ch in enumerate(chk["chain"].values):
-                cells[str(ch), q] = (float(c["chain_angle_deg"].values[k, 0]),
-                                     float(np.max(np.abs(c["chain_angle_deg"].values[k] - ref_ang))))
+                cells[str(ch), q] = (
+                    float(c["chain_angle_deg"].values[k, 0]),
+                    float(np.max(np.abs(c["chain_angle_deg"].values[k] - ref_ang))),
+                )
         for i, h in enumerate(hs):  # one evaluation = one exercise's check
             methods.append(f"check_h{h:g}")
             family.append("check")
@@ -516,8 +426,10 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
             for q in msk["quantity"].values:
                 e = msk["rel_error"].sel({"method": m, "quantity": q}).values[inside]
                 v = msk["moment_nm"].sel({"method": m, "quantity": q}).values[inside]
-                cells[str(m), f"msk_{q}"] = (float(np.mean(v)) if v.size else np.nan,
-                                             float(np.nanmax(e)) if e.size and np.isfinite(e).any() else np.nan)
+                cells[str(m), f"msk_{q}"] = (
+                    float(np.mean(v)) if v.size else np.nan,
+                    float(np.nanmax(e)) if e.size and np.isfinite(e).any() else np.nan,
+                )
 
     err = np.full((len(methods), len(quantities)), np.nan)
     val = np.full_like(err, np.nan)
@@ -527,12 +439,57 @@ def write_speed_accuracy(out_nc: str | Path, out_png: str | Path | None, *, fem_
                 val[i, j], err[i, j] = cells[m, q]
     # 2D and 3D unit models each against their own reference: one front per model, one per other stage
     group = [f.split("_")[-1] if f.startswith(("fem_", "surrogate_")) else f for f in family]
-    ds = FD.speed_accuracy_dataset(methods, quantities, wall, err, family=family, error_units=units, reference=refs,
-                                   value=val, setup_time_s=setup, front_group=group)
-    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
-                  title="Speed against accuracy of every fidelity the workflow offers")
+    ds = FD.speed_accuracy_dataset(
+        methods,
+        quantities,
+        wall,
+        err,
+        family=family,
+        error_units=units,
+        reference=refs,
+        value=val,
+        setup_time_s=setup,
+        front_group=group,
+    )
+    write_dataset(
+        ds,
+        out_nc,
+        rule=rule,
+        config_slice=config_slice,
+        title="Speed against accuracy of every fidelity the workflow offers",
+    )
     if out_png:
-        from workflow.plots_fidelity import plot_speed_accuracy
-
         plot_speed_accuracy(ds, out_png)
     return ds
+
+
+def _surrogate_rows(responses: Mapping[str, str], fem: xr.Dataset, surrogates_cfg: Mapping, cv: xr.Dataset):
+    """Every regressor of each sweep, fitted on all its samples, at the unit study points."""
+
+    rows = []
+    for fea, path in responses.items():
+        resp = open_result(path)
+        sweep_time = float(resp["wall_time_s"].sum())
+        ref = _reference_values(fem, fea)
+        for reg in [str(r) for r in cv["regressor"].values]:
+            t0 = time.perf_counter()
+            s = fit_surrogate(
+                resp, reg, fea=fea, k=int(surrogates_cfg["k"]), random_state=int(surrogates_cfg["random_state"])
+            )
+            fit_t = time.perf_counter() - t0
+            p = np.array(P_STUDY)
+            t1 = time.perf_counter()
+            a, m = s.angle_deg(p, 0.0 * p), s.moment_nm(p, 0.0 * p)
+            q_t = time.perf_counter() - t1
+            rows.append(
+                (
+                    f"surrogate_{fea}_{reg}",
+                    f"surrogate_{fea}",
+                    FD.unit_quantities(a, m, p),
+                    q_t,
+                    sweep_time + fit_t,
+                    ref,
+                    s,
+                )
+            )
+    return rows

@@ -11,37 +11,25 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from workflow.fidelity import pareto_front  # noqa: E402
+from workflow.fidelity.analysis import METHOD_GROUPS, group_errors, pareto_front  # noqa: E402
 
-__all__ = ["GROUPS", "group_errors", "plot_speed_accuracy"]
+__all__ = ["plot_speed_accuracy"]
 
-#: Panels: title, quantity prefix, error label.
-GROUPS = (
-    ("unit free angle (60/180/300 kPa)", "angle_", "largest relative error"),
-    ("unit blocked moment (60/180/300 kPa)", "moment_", "largest relative error"),
-    ("surrogates on held-out FE samples (5-fold CV)", "cv_", "largest RMSE / std"),
-    ("planned pressures (TGE1-5)", "plan_", "largest RMS difference (kPa)"),
-    ("FEA check joint angles", "check_", "largest joint error (deg)"),
-    ("joint moments (test patients in the design region)", "msk_", "largest relative error"),
-)
-
-_COLOURS = {"fem_2d": "tab:blue", "fem_3d": "tab:red", "surrogate_2d": "tab:cyan", "surrogate_3d": "tab:orange",
-            "plan": "tab:purple", "check": "tab:green", "musculoskeletal": "tab:brown"}
-
-
-def group_errors(ds: xr.Dataset, prefix: str) -> xr.DataArray:
-    """Per method, the largest error over the quantities starting with ``prefix`` (NaN if it has none)."""
-    q = [str(x) for x in ds["quantity"].values if str(x).startswith(prefix)]
-    if not q:
-        return xr.full_like(ds["wall_time_s"], np.nan)
-    e = ds["error"].sel(quantity=q)
-    return e.max("quantity", skipna=True).where(e.notnull().any("quantity"))
+_COLOURS = {
+    "fem_2d": "tab:blue",
+    "fem_3d": "tab:red",
+    "surrogate_2d": "tab:cyan",
+    "surrogate_3d": "tab:orange",
+    "plan": "tab:purple",
+    "check": "tab:green",
+    "musculoskeletal": "tab:brown",
+}
 
 
 def _label(method: str) -> str:
     for p in ("fem_", "surrogate_", "plan_", "check_", "msk_"):
         if method.startswith(p):
-            return method[len(p):]
+            return method[len(p) :]
     return method
 
 
@@ -50,7 +38,7 @@ def plot_speed_accuracy(ds: xr.Dataset, out: str | Path) -> None:
 
     References (error 0) sit on the bottom edge, marked "ref".
     """
-    panels = [(t, p, y) for t, p, y in GROUPS if np.isfinite(group_errors(ds, p).values).any()]
+    panels = [(t, p, y) for t, p, y in METHOD_GROUPS if np.isfinite(group_errors(ds, p).values).any()]
     n = max(len(panels), 1)
     cols = min(n, 3)
     rows = int(np.ceil(n / cols))
@@ -71,8 +59,15 @@ def plot_speed_accuracy(ds: xr.Dataset, out: str | Path) -> None:
             front[rows] = pareto_front(np.where(ok & rows, t, np.nan)[rows], np.where(ok & rows, e, np.nan)[rows])
         for i in np.flatnonzero(ok):
             fam = str(ds["family"].values[i])
-            ax.scatter(t[i], ep[i], s=28, color=_COLOURS.get(fam, "k"), zorder=3,
-                       edgecolors="k" if front[i] else "none", linewidths=1.2)
+            ax.scatter(
+                t[i],
+                ep[i],
+                s=28,
+                color=_COLOURS.get(fam, "k"),
+                zorder=3,
+                edgecolors="k" if front[i] else "none",
+                linewidths=1.2,
+            )
             lab = _label(str(ds["method"].values[i])) + (" (ref)" if e[i] == 0 else "")
             ax.annotate(lab, (t[i], ep[i]), fontsize=5.5, xytext=(3, 2), textcoords="offset points")
         for g, ls in zip(dict.fromkeys(groups[front].tolist()), ("--", ":", "-.", "--")):
@@ -91,8 +86,16 @@ def plot_speed_accuracy(ds: xr.Dataset, out: str | Path) -> None:
         fams = sorted({str(ds["family"].values[i]) for i in np.flatnonzero(ok)})
         handles = [plt.Line2D([], [], marker="o", ls="", color=_COLOURS.get(fm, "k"), label=fm) for fm in fams]
         two = {"2d", "3d"} <= set(groups[front].tolist())
-        handles.append(plt.Line2D([], [], color="k", ls="--", lw=0.8,
-                                  label="Pareto fronts (ringed): 2D --, 3D :" if two else "Pareto front (ringed)"))
+        handles.append(
+            plt.Line2D(
+                [],
+                [],
+                color="k",
+                ls="--",
+                lw=0.8,
+                label="Pareto fronts (ringed): 2D --, 3D :" if two else "Pareto front (ringed)",
+            )
+        )
         ax.legend(handles=handles, fontsize=5.5, loc="best")
     fig.suptitle("Speed against accuracy: every fidelity against the finest reference of its quantity", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.96))

@@ -15,13 +15,20 @@ from typing import Iterable, Mapping
 import numpy as np
 import xarray as xr
 
+from ..common.constants import JOINTS
+
 __all__ = [
-    "FINGERS", "JOINTS", "ACTIVATIONS", "RESPONSE_RE",
-    "response_name", "parse_response", "empty_moments", "response_angles", "responses_from_moments",
+    "FINGERS",
+    "ACTIVATIONS",
+    "RESPONSE_RE",
+    "response_name",
+    "parse_response",
+    "empty_moments",
+    "response_angles",
+    "responses_from_moments",
 ]
 
 FINGERS = ("F2", "F3", "F4", "F5")
-JOINTS = ("MCP", "PIP", "DIP")
 ACTIVATIONS = {"P": 0.01, "A": 1.0}
 RESPONSE_RE = re.compile(r"^(F[2-5])_([PA])_(MCP|PIP|DIP)_(-?\d+(?:\.\d+)?)$")
 

@@ -46,13 +46,13 @@ import logging
 import math
 import time
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
 
+from workflow.common.constants import OPENSIM_STATUS
 from workflow.musculoskeletal import opensim_model as om
-from ..runlog import solved
 
 __all__ = [
     "angle_grid",
@@ -62,13 +62,12 @@ __all__ = [
     "sample_finger",
     "sample_run",
     "merge_runs",
-    "STATUS_FLAGS",
+    "scale_factors_of_run",
+    "reference_scale_factors",
 ]
 
 log = logging.getLogger(__name__)
 
-#: CF flags of ``status``.
-STATUS_FLAGS = {0: "ok", 1: "equilibrium_failed", 2: "not_sampled"}
 _FD_STEP_RAD = 1e-4
 
 
@@ -161,7 +160,7 @@ def _gravity_holding_moment(bodyset, state, finger: str, joint: str, g_vec: np.n
     body poses and inertial properties.
     """
     child = om.JOINT_PARENT_CHILD[joint][1]
-    distal = om.BODIES[om.BODIES.index(child):]
+    distal = om.BODIES[om.BODIES.index(child) :]
     cbody = bodyset.get(f"{finger}_{child}")
     centre = _vec(cbody.getPositionInGround(state))
     rot = cbody.getTransformInGround(state).R()
@@ -278,37 +277,75 @@ def sample_model(
     fjaa = ("finger", "joint", "angle_deg", "activation")
     ds = xr.Dataset(
         {
-            "moment_nm": (fjaa, device, {
-                "units": "N m",
-                "long_name": "flexion moment an external device must apply to hold the joint "
-                             "(other joints at 0 deg; muscles and passive joint structures"
-                             + (", gravity included)" if include_gravity else ", gravity excluded)"),
-            }),
-            "passive_tone_free_moment_nm": (("finger", "joint", "angle_deg"), tone_free, {
-                "units": "N m",
-                "long_name": "flexion moment a device must apply to hold the joint with every muscle at "
-                             "activation 0 (passive fibre and tendon forces and joint structures, no 1 % tone)"}),
-            "joint_structure_moment_nm": (("finger", "joint", "angle_deg"), structures, {
-                "units": "N m",
-                "long_name": "flexion moment a device must apply against the passive joint structures "
-                             "(capsule, ligaments, skin; included in moment_nm)"}),
-            "muscle_moment_nm": (fjaa, muscle_moment, {
-                "units": "N m", "long_name": "net flexion moment of the finger's muscles about the joint "
-                                            "(joint structures excluded)"}),
-            "gravity_moment_nm": (("finger", "joint", "angle_deg"), gravity, {
-                "units": "N m",
-                "long_name": "flexion moment needed to hold the segments against gravity (hand horizontal, palm down)"}),
-            "tendon_force_n": (("finger", "muscle", "joint", "angle_deg", "activation"), tendon, {
-                "units": "N", "long_name": "tendon force at static equilibrium"}),
-            "moment_arm_mm": (("finger", "muscle", "joint", "angle_deg"), arm, {
-                "units": "mm", "long_name": "flexion moment arm, tendon excursion -dL/dq"}),
-            "opensim_moment_arm_mm": (("finger", "muscle", "joint", "angle_deg"), arm_osim, {
-                "units": "mm", "long_name": "OpenSim Muscle.computeMomentArm (halves moving-point terms)"}),
-            "status": (fjaa, status, {
-                "long_name": "sample status",
-                "flag_values": np.array(list(STATUS_FLAGS), dtype=np.int8),
-                "flag_meanings": " ".join(STATUS_FLAGS.values()),
-            }),
+            "moment_nm": (
+                fjaa,
+                device,
+                {
+                    "units": "N m",
+                    "long_name": "flexion moment an external device must apply to hold the joint "
+                    "(other joints at 0 deg; muscles and passive joint structures"
+                    + (", gravity included)" if include_gravity else ", gravity excluded)"),
+                },
+            ),
+            "passive_tone_free_moment_nm": (
+                ("finger", "joint", "angle_deg"),
+                tone_free,
+                {
+                    "units": "N m",
+                    "long_name": "flexion moment a device must apply to hold the joint with every muscle at "
+                    "activation 0 (passive fibre and tendon forces and joint structures, no 1 % tone)",
+                },
+            ),
+            "joint_structure_moment_nm": (
+                ("finger", "joint", "angle_deg"),
+                structures,
+                {
+                    "units": "N m",
+                    "long_name": "flexion moment a device must apply against the passive joint structures "
+                    "(capsule, ligaments, skin; included in moment_nm)",
+                },
+            ),
+            "muscle_moment_nm": (
+                fjaa,
+                muscle_moment,
+                {
+                    "units": "N m",
+                    "long_name": "net flexion moment of the finger's muscles about the joint "
+                    "(joint structures excluded)",
+                },
+            ),
+            "gravity_moment_nm": (
+                ("finger", "joint", "angle_deg"),
+                gravity,
+                {
+                    "units": "N m",
+                    "long_name": "flexion moment needed to hold the segments against gravity (hand horizontal, palm down)",
+                },
+            ),
+            "tendon_force_n": (
+                ("finger", "muscle", "joint", "angle_deg", "activation"),
+                tendon,
+                {"units": "N", "long_name": "tendon force at static equilibrium"},
+            ),
+            "moment_arm_mm": (
+                ("finger", "muscle", "joint", "angle_deg"),
+                arm,
+                {"units": "mm", "long_name": "flexion moment arm, tendon excursion -dL/dq"},
+            ),
+            "opensim_moment_arm_mm": (
+                ("finger", "muscle", "joint", "angle_deg"),
+                arm_osim,
+                {"units": "mm", "long_name": "OpenSim Muscle.computeMomentArm (halves moving-point terms)"},
+            ),
+            "status": (
+                fjaa,
+                status,
+                {
+                    "long_name": "sample status",
+                    "flag_values": np.array(list(OPENSIM_STATUS), dtype=np.int8),
+                    "flag_meanings": " ".join(OPENSIM_STATUS.values()),
+                },
+            ),
         },
         coords=coords_,
     )
@@ -359,8 +396,7 @@ def sample_run(
     Adds the scalar coordinate ``run`` and the wall time (``wall_time_s``).
     """
     t0 = time.perf_counter()
-    ds = sample_finger(model_path, scale_factors, angles_deg, activations, fingers,
-                       include_gravity=include_gravity)
+    ds = sample_finger(model_path, scale_factors, angles_deg, activations, fingers, include_gravity=include_gravity)
     ds = ds.assign_coords(run=int(run))
     ds["wall_time_s"] = ((), time.perf_counter() - t0, {"units": "s", "long_name": "sampling wall time"})
     ds["scale"] = (
@@ -374,8 +410,15 @@ def sample_run(
 
 def merge_runs(datasets: Sequence[xr.Dataset]) -> xr.Dataset:
     """Stack per-run datasets along ``run`` (sorted) into the ``moments.nc`` layout."""
-    ds = xr.concat(list(datasets), dim="run", data_vars="all", coords="different", compat="equals",
-                   join="outer", combine_attrs="drop_conflicts")
+    ds = xr.concat(
+        list(datasets),
+        dim="run",
+        data_vars="all",
+        coords="different",
+        compat="equals",
+        join="outer",
+        combine_attrs="drop_conflicts",
+    )
     ds = ds.sortby("run")
     ds["run"].attrs.update({"long_name": "CCD run number"})
     return ds
@@ -389,12 +432,6 @@ def scale_factors_of_run(scaling: xr.Dataset, run: int) -> dict[str, tuple[float
 
 # --- Path-level entry points of the Snakemake rules -------------------------------------------
 
-def _scaling_table(scaling_nc: str | Path) -> xr.Dataset:
-    from workflow.provenance import open_result
-
-    with open_result(scaling_nc) as s:
-        return s.load()
-
 
 def reference_scale_factors(scaling: xr.Dataset, marker: str = "Original") -> dict[str, tuple[float, float, float]]:
     """Scale factors of the run labelled ``marker`` (the centre point: the mean finger)."""
@@ -402,78 +439,3 @@ def reference_scale_factors(scaling: xr.Dataset, marker: str = "Original") -> di
     if marker not in markers:
         raise ValueError(f"no run with marker {marker!r} in the scaling table (markers: {markers})")
     return scale_factors_of_run(scaling, int(scaling["run"].values[markers.index(marker)]))
-
-
-def write_reference_model(
-    parameters: str | Path,
-    scaling_nc: str | Path,
-    out: str | Path,
-    *,
-    fingers: Sequence[str],
-    reference_marker: str = "Original",
-) -> Path:
-    """Rule ``opensim_model``: the reference ``.osim`` (mean finger / the reference run's factors)."""
-    params = om.load_parameters(parameters)
-    ref = reference_scale_factors(_scaling_table(scaling_nc), reference_marker)
-    path = om.write_model(params, out, fingers, ref)
-    log.info("wrote %s (fingers %s, reference factors %s)", path, list(fingers), ref)
-    return path
-
-
-def write_run(
-    model_path: str | Path,
-    scaling_nc: str | Path,
-    run: int,
-    out: str | Path,
-    *,
-    fingers: Sequence[str],
-    angle_step_deg: float,
-    activations: Sequence[float],
-    include_gravity: bool,
-    rule: str,
-    config_slice: Any,
-) -> xr.Dataset:
-    """Rule ``opensim_sample``: one CCD run's moment-angle curves -> ``run{run}.nc``."""
-    from workflow.provenance import write_dataset
-
-    scaling = _scaling_table(scaling_nc)
-    factors = scale_factors_of_run(scaling, int(run))
-    ds = sample_run(model_path, factors, int(run), fingers, angle_grid(angle_step_deg), activations, include_gravity)
-    marker = str(scaling["marker"].sel(run=int(run)).values)
-    ds = ds.assign_coords(marker=marker)
-    # The reference model carries the parameter file's content: hash it with the config slice.
-    config_slice = {"config": config_slice, "reference_model_sha256": _sha256(model_path)}
-    n_fail = int((ds["status"] == 1).sum())
-    log.info("run %s (%s): %d samples in %.2f s, %d failed equilibria", run, marker,
-             int((ds["status"] == 0).sum()), float(ds["wall_time_s"]), n_fail,
-             extra=solved(n_fail, n=int((ds["status"] == 0).sum()) + n_fail))
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title=f"OpenSim finger moments, CCD run {run} ({marker})",
-                  source="finger-rehab-workflow generated OpenSim finger model (opensim backend)")
-    return ds
-
-
-def _sha256(path: str | Path) -> str:
-    import hashlib
-
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def write_merged(run_files: Sequence[str | Path], out: str | Path, *, rule: str, config_slice: Any) -> xr.Dataset:
-    """Rule ``opensim_merge``: the per-run files -> ``moments_opensim.nc`` (``moments.nc`` layout)."""
-    from workflow.provenance import open_result, write_dataset
-
-    parts = []
-    for f in run_files:
-        with open_result(f) as d:
-            parts.append(d.load())
-    ds = merge_runs(parts)
-    # Encodings read from the per-run files (e.g. a 2-character string width for
-    # the marker "DM") must not constrain the merged file.
-    for v in ds.variables.values():
-        v.encoding = {}
-    ds.attrs["backend"] = "opensim"
-    write_dataset(ds, out, rule=rule, config_slice=config_slice,
-                  title="Joint moments at the CCD runs (OpenSim backend, generated finger model)",
-                  source="finger-rehab-workflow generated OpenSim finger model (opensim backend)")
-    return ds

@@ -42,6 +42,8 @@ finger.
 Units: lengths in the parameter file are mm (moment arms, segment
 dimensions), forces N, fibre lengths m, angles deg, densities kg m-3; the
 OpenSim model itself is in SI units (m, kg, N, rad).
+
+Over 400 lines: most of it is the finger's parameter tables (bodies, joints, muscle paths) written out once, beside the code that builds the model from them.
 """
 
 from __future__ import annotations
@@ -53,9 +55,10 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import yaml
 
+from ..common.constants import JOINTS
+
 __all__ = [
     "BODIES",
-    "JOINTS",
     "JOINT_PARENT_CHILD",
     "JOINT_RANGE_DEG",
     "FINGERS",
@@ -71,7 +74,6 @@ __all__ = [
 ]
 
 BODIES = ("MC", "PP", "MP", "DP")
-JOINTS = ("MCP", "PIP", "DIP")
 JOINT_PARENT_CHILD = {"MCP": ("MC", "PP"), "PIP": ("PP", "MP"), "DIP": ("MP", "DP")}
 #: Ranges of motion used by the paper (section 2.2), deg.
 JOINT_RANGE_DEG = {"MCP": (-45.0, 90.0), "PIP": (0.0, 100.0), "DIP": (0.0, 80.0)}
@@ -145,7 +147,9 @@ def joint_structure_stiffness(params: Mapping[str, Any], finger: str) -> dict[st
             continue
         if "derived_from" in js:
             src = joints[js["derived_from"]]
-            ratio = _joint_breadth_depth2(params, finger, joint) / _joint_breadth_depth2(params, finger, js["derived_from"])
+            ratio = _joint_breadth_depth2(params, finger, joint) / _joint_breadth_depth2(
+                params, finger, js["derived_from"]
+            )
             kf = float(src["stiffness_nm_per_rad"]) * ratio
             ke = float(src.get("extension_stiffness_nm_per_rad", src["stiffness_nm_per_rad"])) * ratio
         else:
@@ -182,7 +186,9 @@ def _check_parameters(params: Mapping[str, Any]) -> None:
         for mname, mp in fp["muscles"].items():
             arms = mp["moment_arms_mm"]
             crossed = [j for j in JOINTS if j in arms]
-            if not crossed or crossed != list(JOINTS[JOINTS.index(crossed[0]):JOINTS.index(crossed[0]) + len(crossed)]):
+            if not crossed or crossed != list(
+                JOINTS[JOINTS.index(crossed[0]) : JOINTS.index(crossed[0]) + len(crossed)]
+            ):
                 raise ValueError(f"{finger} {mname}: crossed joints must be consecutive, got {list(arms)}")
             if any(a == 0 for a in arms.values()):
                 raise ValueError(f"{finger} {mname}: a moment arm of 0 mm is not a crossing")
@@ -341,7 +347,9 @@ def _add_finger(
         model.addForce(mus)
 
 
-def _add_joint_structures(osim, model, params: Mapping[str, Any], finger: str, ref: Mapping[str, Sequence[float]]) -> None:
+def _add_joint_structures(
+    osim, model, params: Mapping[str, Any], finger: str, ref: Mapping[str, Sequence[float]]
+) -> None:
     """Passive joint structures (capsule, ligaments, volar plate, skin) as one force per joint.
 
     An OpenSim ``CoordinateLimitForce`` with both limits at the neutral angle
@@ -361,8 +369,14 @@ def _add_joint_structures(osim, model, params: Mapping[str, Any], finger: str, r
         f = joint_size_factor(ref, joint)
         deg = math.pi / 180.0  # CoordinateLimitForce takes stiffness per degree for rotational coordinates
         clf = osim.CoordinateLimitForce(
-            joint_coordinate_name(finger, joint), q0, k["flexion"] / f * deg, q0, k["extension"] / f * deg, 0.0,
-            transition)
+            joint_coordinate_name(finger, joint),
+            q0,
+            k["flexion"] / f * deg,
+            q0,
+            k["extension"] / f * deg,
+            0.0,
+            transition,
+        )
         clf.setName(joint_structure_name(finger, joint))
         model.addForce(clf)
 

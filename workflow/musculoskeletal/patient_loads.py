@@ -15,7 +15,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .. import doe
+from workflow.doe import ccd as doe
+
 from . import rsm
 from .moments import JOINTS, parse_response, response_angles, response_name, responses_from_moments
 
@@ -59,7 +60,9 @@ def joint_loads(
         log.warning(
             "patient %s: coded levels %s lie outside the design region (||x|| = %.3f > 1); "
             "the response surfaces extrapolate",
-            name, {k: round(v, 3) for k, v in x.items()}, float(np.linalg.norm(list(x.values()))),
+            name,
+            {k: round(v, 3) for k, v in x.items()},
+            float(np.linalg.norm(list(x.values()))),
         )
     responses = responses_from_moments(moments, exercises)
     ex_names = list(exercises)
@@ -89,7 +92,9 @@ def joint_loads(
                 continue
             (m, l, h), form = _predict(response_name(finger, 0.01, joint, angle))
             if form == "missing":
-                log.warning("patient %s: no passive response %s for %s", name, response_name(finger, 0.01, joint, angle), ex)
+                log.warning(
+                    "patient %s: no passive response %s for %s", name, response_name(finger, 0.01, joint, angle), ex
+                )
             mean[i, j], lo[i, j], hi[i, j], form_used[i, j] = m, l, h, form
     limit, limit_lo, limit_angle = np.full(3, np.nan), np.full(3, np.nan), np.full(3, np.nan)
     for j, joint in enumerate(JOINTS):
@@ -107,15 +112,59 @@ def joint_loads(
     ds = xr.Dataset(
         {
             "x": ("dimension", [x[f] for f in doe.FACTORS], {"units": "1", "long_name": "coded finger dimension"}),
-            "passive_moment_nm": (("exercise", "joint"), mean, {"units": "N m", "long_name": "predicted passive joint moment at the target angle"}),
-            "passive_moment_lo_nm": (("exercise", "joint"), lo, {"units": "N m", "long_name": f"lower {100 * (1 - prediction_alpha):g} % prediction bound of the passive moment"}),
-            "passive_moment_hi_nm": (("exercise", "joint"), hi, {"units": "N m", "long_name": f"upper {100 * (1 - prediction_alpha):g} % prediction bound of the passive moment"}),
+            "passive_moment_nm": (
+                ("exercise", "joint"),
+                mean,
+                {"units": "N m", "long_name": "predicted passive joint moment at the target angle"},
+            ),
+            "passive_moment_lo_nm": (
+                ("exercise", "joint"),
+                lo,
+                {
+                    "units": "N m",
+                    "long_name": f"lower {100 * (1 - prediction_alpha):g} % prediction bound of the passive moment",
+                },
+            ),
+            "passive_moment_hi_nm": (
+                ("exercise", "joint"),
+                hi,
+                {
+                    "units": "N m",
+                    "long_name": f"upper {100 * (1 - prediction_alpha):g} % prediction bound of the passive moment",
+                },
+            ),
             "rsm_form": (("exercise", "joint"), form_used.astype(str), {"long_name": "response-surface form used"}),
-            "active_limit_nm": ("joint", limit, {"units": "N m", "long_name": "active safety limit: magnitude of the active moment at the joint's largest target angle"}),
-            "active_limit_lo_nm": ("joint", limit_lo, {"units": "N m", "long_name": "smallest magnitude of the active moment within its prediction interval (conservative limit)"}),
-            "active_limit_angle_deg": ("joint", limit_angle, {"units": "degree", "long_name": "angle at which the active limit is read"}),
-            "target_angle_deg": (("exercise", "joint"), np.array([[float(exercises[e][j.lower()]) for j in JOINTS] for e in ex_names]), {"units": "degree", "long_name": "target joint angle (Table 1)"}),
-            "in_design_range": ((), flags["in_sphere"] and flags["in_box"], {"long_name": "coded levels inside the CCD sphere (||x|| <= 1, |x_i| <= 1)"}),
+            "active_limit_nm": (
+                "joint",
+                limit,
+                {
+                    "units": "N m",
+                    "long_name": "active safety limit: magnitude of the active moment at the joint's largest target angle",
+                },
+            ),
+            "active_limit_lo_nm": (
+                "joint",
+                limit_lo,
+                {
+                    "units": "N m",
+                    "long_name": "smallest magnitude of the active moment within its prediction interval (conservative limit)",
+                },
+            ),
+            "active_limit_angle_deg": (
+                "joint",
+                limit_angle,
+                {"units": "degree", "long_name": "angle at which the active limit is read"},
+            ),
+            "target_angle_deg": (
+                ("exercise", "joint"),
+                np.array([[float(exercises[e][j.lower()]) for j in JOINTS] for e in ex_names]),
+                {"units": "degree", "long_name": "target joint angle (Table 1)"},
+            ),
+            "in_design_range": (
+                (),
+                flags["in_sphere"] and flags["in_box"],
+                {"long_name": "coded levels inside the CCD sphere (||x|| <= 1, |x_i| <= 1)"},
+            ),
         },
         coords={"exercise": ex_names, "joint": list(JOINTS), "dimension": list(doe.FACTORS)},
     )

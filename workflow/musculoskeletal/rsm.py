@@ -26,9 +26,16 @@ __all__ = ["FORMS", "TERMS", "FORMULAS", "fit_response", "fit_all", "rsm_dataset
 
 FORMS = ("linear", "quadratic", "quadratic_3fi")
 TERMS = (
-    "1", "depth", "length", "breadth",
-    "depth^2", "length^2", "breadth^2",
-    "depth:length", "depth:breadth", "length:breadth",
+    "1",
+    "depth",
+    "length",
+    "breadth",
+    "depth^2",
+    "length^2",
+    "breadth^2",
+    "depth:length",
+    "depth:breadth",
+    "length:breadth",
     "depth:length:breadth",
 )
 _LIN = "depth + length + breadth"
@@ -95,7 +102,11 @@ def rsm_dataset(fits: Mapping[str, Mapping[str, object]], alpha: float = 0.05) -
     ds = xr.Dataset(
         {
             "coef": (("response", "form", "term"), coef, {"units": "N m", "long_name": "regression coefficient"}),
-            "term_p_value": (("response", "form", "term"), tp, {"units": "1", "long_name": "t-test p-value of the term"}),
+            "term_p_value": (
+                ("response", "form", "term"),
+                tp,
+                {"units": "1", "long_name": "t-test p-value of the term"},
+            ),
             "r2": (dims2, r2, {"units": "1", "long_name": "coefficient of determination R^2"}),
             "adj_r2": (dims2, r2a, {"units": "1", "long_name": "adjusted R^2"}),
             "p_value": (dims2, p, {"units": "1", "long_name": "overall F-test p-value"}),

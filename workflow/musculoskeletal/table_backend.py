@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .moments import empty_moments, parse_response, RESPONSE_RE
+from .moments import RESPONSE_RE, empty_moments, parse_response
 
 __all__ = ["read_export", "moments_from_export"]
 

@@ -16,13 +16,12 @@ from __future__ import annotations
 import logging
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 import xarray as xr
 
-__all__ = ["read_reference", "compare", "write_validation", "plot_validation", "DIMENSIONS", "FORMS"]
+__all__ = ["read_reference", "compare", "DIMENSIONS", "FORMS", "summary"]
 
 log = logging.getLogger(__name__)
 
@@ -85,16 +84,22 @@ def compare(ours: xr.Dataset, design: pd.DataFrame, reference: pd.DataFrame, flo
         finger, kind, joint, angle = name.split("_")
         ref_v[i] = reference[name].to_numpy(float)[ref_rows]
         if finger in ours["finger"].values and float(angle) in ours["angle_deg"].values:
-            ours_v[i] = ours["moment_nm"].sel(run=runs, finger=finger, joint=joint, angle_deg=float(angle),
-                                              activation=_ACT[kind]).to_numpy()
+            ours_v[i] = (
+                ours["moment_nm"]
+                .sel(run=runs, finger=finger, joint=joint, angle_deg=float(angle), activation=_ACT[kind])
+                .to_numpy()
+            )
     # Passive responses also against our tone-free passive curve (activation 0), when present.
     tone_v = np.full((nr, nn), np.nan)
     if "passive_tone_free_moment_nm" in ours:
         for i, name in enumerate(responses):
             finger, kind, joint, angle = name.split("_")
             if kind == "P" and finger in ours["finger"].values and float(angle) in ours["angle_deg"].values:
-                tone_v[i] = ours["passive_tone_free_moment_nm"].sel(
-                    run=runs, finger=finger, joint=joint, angle_deg=float(angle)).to_numpy()
+                tone_v[i] = (
+                    ours["passive_tone_free_moment_nm"]
+                    .sel(run=runs, finger=finger, joint=joint, angle_deg=float(angle))
+                    .to_numpy()
+                )
     abs_err = np.abs(ours_v - ref_v)
     with np.errstate(invalid="ignore", divide="ignore"):
         rel = np.where(np.abs(ref_v) >= floor_nm, (ours_v - ref_v) / np.abs(ref_v), np.nan)
@@ -128,131 +133,69 @@ def compare(ours: xr.Dataset, design: pd.DataFrame, reference: pd.DataFrame, flo
             "ours": (rd, ours_v, {"units": "N m", "long_name": "our OpenSim moment (device flexion moment)"}),
             "reference": (rd, ref_v, {"units": "N m", "long_name": "authors' OpenSim (ARMS) export"}),
             "abs_error": (rd, abs_err, {"units": "N m", "long_name": "|ours - reference|"}),
-            "rel_error": (rd, rel, {"units": "1", "long_name": f"(ours - reference)/|reference| (NaN if |reference| < {floor_nm} N m)"}),
+            "rel_error": (
+                rd,
+                rel,
+                {"units": "1", "long_name": f"(ours - reference)/|reference| (NaN if |reference| < {floor_nm} N m)"},
+            ),
             "magnitude_ratio": (rd, ratio, {"units": "1", "long_name": "|ours| / |reference|"}),
             "sign_agrees": (rd, sign_ok, {"long_name": "ours and the reference have the same sign"}),
             "slope_ours": (r_, slopes_o, {"units": "N m", "long_name": "linear-fit slope of |ours| per coded unit"}),
-            "slope_reference": (r_, slopes_r, {"units": "N m", "long_name": "linear-fit slope of |reference| per coded unit"}),
-            "trend_agrees": (r_, trend_ok, {"long_name": "slopes share their sign (or both < 5 % of the mean per coded unit)"}),
-            "r2_ours": (("response", "form"), r2_o, {"units": "1", "long_name": "R^2 of the response surface fitted to ours"}),
-            "r2_reference": (("response", "form"), r2_r, {"units": "1", "long_name": "R^2 of the response surface fitted to the reference"}),
+            "slope_reference": (
+                r_,
+                slopes_r,
+                {"units": "N m", "long_name": "linear-fit slope of |reference| per coded unit"},
+            ),
+            "trend_agrees": (
+                r_,
+                trend_ok,
+                {"long_name": "slopes share their sign (or both < 5 % of the mean per coded unit)"},
+            ),
+            "r2_ours": (
+                ("response", "form"),
+                r2_o,
+                {"units": "1", "long_name": "R^2 of the response surface fitted to ours"},
+            ),
+            "r2_reference": (
+                ("response", "form"),
+                r2_r,
+                {"units": "1", "long_name": "R^2 of the response surface fitted to the reference"},
+            ),
         },
         coords={"response": responses, "run": runs, "dimension": list(DIMENSIONS), "form": list(FORMS)},
     )
-    ds["median_magnitude_ratio"] = (("response",), med, {"units": "1", "long_name": "median over runs of |ours|/|reference|"})
+    ds["median_magnitude_ratio"] = (
+        ("response",),
+        med,
+        {"units": "1", "long_name": "median over runs of |ours|/|reference|"},
+    )
     with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
         ratio_tf = np.where(np.abs(ref_v) >= floor_nm, np.abs(tone_v) / np.abs(ref_v), np.nan)
-        ds["ours_tone_free"] = (rd, tone_v, {"units": "N m", "long_name": "our passive moment at activation 0 (passive responses)"})
-        ds["median_magnitude_ratio_tone_free"] = (("response",), np.nanmedian(ratio_tf, axis=1), {
-            "units": "1", "long_name": "median over runs of |ours at activation 0| / |reference| (passive responses)"})
+        ds["ours_tone_free"] = (
+            rd,
+            tone_v,
+            {"units": "N m", "long_name": "our passive moment at activation 0 (passive responses)"},
+        )
+        ds["median_magnitude_ratio_tone_free"] = (
+            ("response",),
+            np.nanmedian(ratio_tf, axis=1),
+            {"units": "1", "long_name": "median over runs of |ours at activation 0| / |reference| (passive responses)"},
+        )
         sign_tf = np.where(np.isfinite(tone_v), np.sign(tone_v) == np.sign(ref_v), np.nan)
-        ds["sign_agreement_fraction_tone_free"] = (("response",), np.nanmean(sign_tf, axis=1), {
-            "units": "1", "long_name": "fraction of runs where our activation-0 passive moment has the reference's sign"})
-    ds["sign_agreement_fraction"] = (("response",), sign_ok.mean(axis=1), {"units": "1", "long_name": "fraction of runs with the same sign"})
-    return ds
-
-
-def plot_validation(ds: xr.Dataset, out: str | Path) -> Path:
-    """Two panels: |ours| against |theirs| (log-log, one point per response and run), and trends."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 5))
-    for kind, marker in (("_P_", "o"), ("_A_", "s")):
-        sel = [r for r in ds["response"].values if kind in r]
-        if not sel:
-            continue
-        d = ds.sel(response=sel)
-        same = d["sign_agrees"].values
-        o, r = np.abs(d["ours"].values), np.abs(d["reference"].values)
-        a.scatter(r[same], o[same], marker=marker, s=12, label=f"{'passive' if kind == '_P_' else 'active'}, same sign")
-        a.scatter(r[~same], o[~same], marker=marker, s=12, facecolors="none", edgecolors="k",
-                  label=f"{'passive' if kind == '_P_' else 'active'}, opposite sign")
-    if "ours_tone_free" in ds:
-        tf = np.abs(ds["ours_tone_free"].values)
-        ok = np.isfinite(tf)
-        a.scatter(np.abs(ds["reference"].values)[ok], tf[ok], marker="^", s=12, color="C2",
-                  label="passive at activation 0 (tone-free)")
-    lims = [1e-4, 20]
-    a.plot(lims, lims, "k--", lw=0.8)
-    a.set(xscale="log", yscale="log", xlim=lims, ylim=lims, xlabel="|reference| (ARMS export), N m",
-          ylabel="|ours|, N m", title="Moments at the 15 CCD runs")
-    a.legend(fontsize=7)
-    f3 = [r for r in ds["response"].values if r.startswith("F3_")]
-    d = ds.sel(response=f3)
-    norm_o = d["slope_ours"] / np.abs(d["ours"]).mean("run")
-    norm_r = d["slope_reference"] / np.abs(d["reference"]).mean("run")
-    xpos = np.arange(len(f3))
-    for k, dim in enumerate(DIMENSIONS):
-        b.scatter(xpos + 0.25 * (k - 1), norm_r.sel(dimension=dim), marker="x", color=f"C{k}", label=f"{dim}, reference")
-        b.scatter(xpos + 0.25 * (k - 1), norm_o.sel(dimension=dim), marker="o", facecolors="none",
-                  edgecolors=f"C{k}", label=f"{dim}, ours")
-    b.axhline(0, color="k", lw=0.6)
-    b.set_xticks(xpos, f3, rotation=45, ha="right", fontsize=8)
-    b.set(ylabel="slope / mean |moment| per coded unit", title="Trends with each dimension (middle finger)")
-    b.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
-
-
-def write_validation(
-    moments_nc: str | Path,
-    ccd_nc: str | Path,
-    reference_csv: str | Path,
-    out_nc: str | Path,
-    out_png: str | Path,
-    *,
-    rule: str,
-    config_slice: Any,
-) -> xr.Dataset:
-    """Rule ``opensim_validate``: write ``musculoskeletal.nc`` and its plot.
-
-    When the reference export is absent the dataset has an empty ``response``
-    dimension and the attribute ``reference_missing = 1``, and the plot says so.
-    """
-    from workflow.provenance import open_result, write_dataset
-
-    with open_result(moments_nc) as m:
-        ours = m.load()
-    with open_result(ccd_nc) as c:
-        design = pd.DataFrame({d: c[d].values for d in DIMENSIONS}, index=c["run"].values)
-    ref = read_reference(reference_csv)
-    if ref is None:
-        log.warning("reference export %s absent: writing an empty validation", reference_csv)
-        ds = xr.Dataset({v: (("response", "run"), np.empty((0, len(design)))) for v in
-                         ("ours", "reference", "abs_error", "rel_error")},
-                        coords={"response": [], "run": list(design.index)})
-        for v, u in (("ours", "N m"), ("reference", "N m"), ("abs_error", "N m"), ("rel_error", "1")):
-            ds[v].attrs = {"units": u, "long_name": v.replace("_", " ")}
-        ds.attrs["reference_missing"] = 1
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, ax = plt.subplots()
-        ax.text(0.5, 0.5, f"reference export absent:\n{reference_csv}", ha="center")
-        ax.axis("off")
-        Path(out_png).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out_png)
-        plt.close(fig)
-    else:
-        ds = compare(ours, design, ref)
-        ds.attrs["reference_missing"] = 0
-        plot_validation(ds, out_png)
-        summ = summary(ds)
-        for line in summ.splitlines():
-            log.info(line)
-    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice,
-                  title="OpenSim backend against the authors' ARMS export",
-                  source=f"ours: {moments_nc}; reference: {reference_csv}")
+        ds["sign_agreement_fraction_tone_free"] = (
+            ("response",),
+            np.nanmean(sign_tf, axis=1),
+            {
+                "units": "1",
+                "long_name": "fraction of runs where our activation-0 passive moment has the reference's sign",
+            },
+        )
+    ds["sign_agreement_fraction"] = (
+        ("response",),
+        sign_ok.mean(axis=1),
+        {"units": "1", "long_name": "fraction of runs with the same sign"},
+    )
     return ds
 
 
@@ -261,12 +204,18 @@ def summary(ds: xr.Dataset) -> str:
     lines = [f"{'response':16s} sign  ratio   d(ours/ref)        l(ours/ref)        b(ours/ref)        R2q ours/ref"]
     for r in ds["response"].values:
         d = ds.sel(response=r)
-        sl = "  ".join(f"{float(d.slope_ours.sel(dimension=k)):+.3g}/{float(d.slope_reference.sel(dimension=k)):+.3g}"
-                       for k in DIMENSIONS)
+        sl = "  ".join(
+            f"{float(d.slope_ours.sel(dimension=k)):+.3g}/{float(d.slope_reference.sel(dimension=k)):+.3g}"
+            for k in DIMENSIONS
+        )
         tf = ""
         if "median_magnitude_ratio_tone_free" in d and np.isfinite(float(d.median_magnitude_ratio_tone_free)):
-            tf = (f"  tone-free: sign {float(d.sign_agreement_fraction_tone_free):.2f}"
-                  f" ratio {float(d.median_magnitude_ratio_tone_free):.3f}")
-        lines.append(f"{r:16s} {float(d.sign_agreement_fraction):.2f}  {float(d.median_magnitude_ratio):6.3f}  {sl}  "
-                     f"{float(d.r2_ours.sel(form='quadratic')):.3f}/{float(d.r2_reference.sel(form='quadratic')):.3f}{tf}")
+            tf = (
+                f"  tone-free: sign {float(d.sign_agreement_fraction_tone_free):.2f}"
+                f" ratio {float(d.median_magnitude_ratio_tone_free):.3f}"
+            )
+        lines.append(
+            f"{r:16s} {float(d.sign_agreement_fraction):.2f}  {float(d.median_magnitude_ratio):6.3f}  {sl}  "
+            f"{float(d.r2_ours.sel(form='quadratic')):.3f}/{float(d.r2_reference.sel(form='quadratic')):.3f}{tf}"
+        )
     return "\n".join(lines)

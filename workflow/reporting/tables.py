@@ -7,18 +7,13 @@ dataset, each pure (a dataset in, a DataFrame out); units in the column names.
 
 from __future__ import annotations
 
-import html
-from pathlib import Path
-from typing import Sequence
-
 import numpy as np
 import pandas as pd
 import xarray as xr
-from workflow.provenance import open_result
+
+from workflow.fidelity.analysis import METHOD_GROUPS, group_errors
 
 __all__ = [
-    "html_page",
-    "write_html",
     "scaling_table",
     "musculoskeletal_table",
     "unit_check_table",
@@ -29,39 +24,8 @@ __all__ = [
     "cascade_plan_table",
     "joint_loads_table",
     "TABLES",
-    "write_table",
+    "speed_accuracy_table",
 ]
-
-_STYLE = """
-body { font-family: sans-serif; font-size: 13px; margin: 8px; }
-table { border-collapse: collapse; margin-bottom: 14px; }
-th, td { border: 1px solid #ccc; padding: 3px 7px; text-align: right; }
-th { background: #eef2f7; }
-td:first-child, th:first-child { text-align: left; }
-h4 { margin: 10px 0 4px; }
-p.note { color: #444; max-width: 60em; }
-"""
-
-
-def html_page(title: str, tables: Sequence[tuple[str, pd.DataFrame]], notes: Sequence[str] = ()) -> str:
-    """A standalone HTML page: title, notes, then each (caption, table)."""
-    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>",
-             f"<style>{_STYLE}</style></head><body><h3>{html.escape(title)}</h3>"]
-    parts += [f"<p class='note'>{html.escape(n)}</p>" for n in notes]
-    for cap, df in tables:
-        if cap:
-            parts.append(f"<h4>{html.escape(cap)}</h4>")
-        parts.append(df.to_html(border=0, na_rep="", float_format=lambda v: f"{v:.4g}", escape=True))
-    parts.append("</body></html>")
-    return "\n".join(parts)
-
-
-def write_html(path: str | Path, title: str, tables: Sequence[tuple[str, pd.DataFrame]], notes: Sequence[str] = ()) -> Path:
-    """Write `html_page` to ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(html_page(title, tables, notes), encoding="utf-8")
-    return path
 
 
 def scaling_table(ds: xr.Dataset) -> pd.DataFrame:
@@ -72,8 +36,15 @@ def scaling_table(ds: xr.Dataset) -> pd.DataFrame:
         for a in ds["axis"].values:
             e = err.sel(body=b, axis=a).values
             i = int(np.nanargmax(e))
-            rows.append({"body": str(b), "axis": str(a), "max |error|": float(np.nanmax(e)),
-                         "mean |error|": float(np.nanmean(e)), "run of max": str(ds["marker"].values[i])})
+            rows.append(
+                {
+                    "body": str(b),
+                    "axis": str(a),
+                    "max |error|": float(np.nanmax(e)),
+                    "mean |error|": float(np.nanmean(e)),
+                    "run of max": str(ds["marker"].values[i]),
+                }
+            )
     return pd.DataFrame(rows).set_index(["body", "axis"])
 
 
@@ -84,9 +55,12 @@ def musculoskeletal_table(ds: xr.Dataset) -> pd.DataFrame:
     rows = []
     for r in ds["response"].values:
         d = ds.sel(response=r)
-        row = {"response": str(r), "mean |ours| (N m)": float(np.nanmean(np.abs(d["ours"]))),
-               "mean |reference| (N m)": float(np.nanmean(np.abs(d["reference"]))),
-               "median rel. error": float(np.nanmedian(d["rel_error"])) if np.isfinite(d["rel_error"]).any() else np.nan}
+        row = {
+            "response": str(r),
+            "mean |ours| (N m)": float(np.nanmean(np.abs(d["ours"]))),
+            "mean |reference| (N m)": float(np.nanmean(np.abs(d["reference"]))),
+            "median rel. error": float(np.nanmedian(d["rel_error"])) if np.isfinite(d["rel_error"]).any() else np.nan,
+        }
         if "sign_agrees" in d:
             row["sign agrees (runs)"] = f"{int(d['sign_agrees'].sum())}/{d.sizes['run']}"
         rows.append(row)
@@ -99,16 +73,19 @@ def unit_check_table(ds: xr.Dataset) -> pd.DataFrame:
     for m in ds["model"].values:
         for p in ds["p_top_kpa"].values:
             d = ds.sel(model=m, p_top_kpa=p)
-            rows.append({
-                "model": str(m).upper(), "P_T (kPa)": float(p),
-                "free angle per unit (deg)": float(d["bending_angle_deg"]),
-                "blocked moment per unit (N m)": float(d["bending_moment_nm"]),
-                "status free / blocked": f"{int(d['status'].sel(case='free'))} / {int(d['status'].sel(case='blocked'))}",
-                "max penetration free / blocked (mm)": f"{float(d['max_penetration_mm'].sel(case='free')):.4f} / "
-                                                       f"{float(d['max_penetration_mm'].sel(case='blocked')):.4f}",
-                "wall time free / blocked (s)": f"{float(d['wall_time_s'].sel(case='free')):.1f} / "
-                                                f"{float(d['wall_time_s'].sel(case='blocked')):.1f}",
-            })
+            rows.append(
+                {
+                    "model": str(m).upper(),
+                    "P_T (kPa)": float(p),
+                    "free angle per unit (deg)": float(d["bending_angle_deg"]),
+                    "blocked moment per unit (N m)": float(d["bending_moment_nm"]),
+                    "status free / blocked": f"{int(d['status'].sel(case='free'))} / {int(d['status'].sel(case='blocked'))}",
+                    "max penetration free / blocked (mm)": f"{float(d['max_penetration_mm'].sel(case='free')):.4f} / "
+                    f"{float(d['max_penetration_mm'].sel(case='blocked')):.4f}",
+                    "wall time free / blocked (s)": f"{float(d['wall_time_s'].sel(case='free')):.1f} / "
+                    f"{float(d['wall_time_s'].sel(case='blocked')):.1f}",
+                }
+            )
     return pd.DataFrame(rows).set_index(["model", "P_T (kPa)"])
 
 
@@ -117,8 +94,12 @@ def surrogate_cv_table(ds: xr.Dataset) -> pd.DataFrame:
     rows = []
     for f in ds["fea"].values:
         for r in ds["regressor"].values:
-            row = {"FE model": str(f).upper(), "regressor": str(r), "score (RMSE/std)": float(ds["score"].sel(fea=f, regressor=r)),
-                   "chosen": "yes" if bool(ds["selected"].sel(fea=f, regressor=r)) else ""}
+            row = {
+                "FE model": str(f).upper(),
+                "regressor": str(r),
+                "score (RMSE/std)": float(ds["score"].sel(fea=f, regressor=r)),
+                "chosen": "yes" if bool(ds["selected"].sel(fea=f, regressor=r)) else "",
+            }
             for t in ds["target"].values:
                 u = "deg" if str(t) == "angle" else "N m"
                 d = ds.sel(fea=f, regressor=r, target=t)
@@ -135,13 +116,20 @@ def mapping_table(ds: xr.Dataset) -> pd.DataFrame:
     for e in ds["exercise"].values:
         for g in ds["group"].values:
             d = ds.sel(exercise=e, group=g)
-            rows.append({"exercise": str(e), "group": str(g),
-                         "3D P_T / P_B (kPa)": f"{float(d['pressure_3d_kpa'].sel(chamber='top')):.1f} / "
-                                               f"{float(d['pressure_3d_kpa'].sel(chamber='bottom')):.1f}",
-                         "2D P_T / P_B (kPa)": f"{float(d['pressure_2d_kpa'].sel(chamber='top')):.1f} / "
-                                               f"{float(d['pressure_2d_kpa'].sel(chamber='bottom')):.1f}",
-                         "scale": float(d["scale"]), "angle 3D (deg)": float(d["angle_3d_deg"]),
-                         "status": int(d["status"]), "reason": str(d["reason"].values)})
+            rows.append(
+                {
+                    "exercise": str(e),
+                    "group": str(g),
+                    "3D P_T / P_B (kPa)": f"{float(d['pressure_3d_kpa'].sel(chamber='top')):.1f} / "
+                    f"{float(d['pressure_3d_kpa'].sel(chamber='bottom')):.1f}",
+                    "2D P_T / P_B (kPa)": f"{float(d['pressure_2d_kpa'].sel(chamber='top')):.1f} / "
+                    f"{float(d['pressure_2d_kpa'].sel(chamber='bottom')):.1f}",
+                    "scale": float(d["scale"]),
+                    "angle 3D (deg)": float(d["angle_3d_deg"]),
+                    "status": int(d["status"]),
+                    "reason": str(d["reason"].values),
+                }
+            )
     return pd.DataFrame(rows).set_index(["exercise", "group"])
 
 
@@ -165,8 +153,13 @@ def cascade_validation_table(ds: xr.Dataset) -> pd.DataFrame:
 
 def reached_table(ds: xr.Dataset) -> pd.DataFrame:
     """Exercises we reach against each of the paper's sets (Table 8 planned, 2D FEA, dummy finger)."""
-    out = pd.DataFrame({str(s): ["yes" if v else "no" for v in ds["paper_reached"].sel(paper_set=s).values]
-                        for s in ds["paper_set"].values}, index=[str(e) for e in ds["exercise"].values])
+    out = pd.DataFrame(
+        {
+            str(s): ["yes" if v else "no" for v in ds["paper_reached"].sel(paper_set=s).values]
+            for s in ds["paper_set"].values
+        },
+        index=[str(e) for e in ds["exercise"].values],
+    )
     out.insert(0, "ours", ["yes" if v else "no" for v in ds["ours_achieved"].values])
     out.loc["agreement"] = [""] + [f"{float(v):.0%}" for v in ds["reached_agreement"].values]
     return out
@@ -179,8 +172,10 @@ def cascade_plan_table(ds: xr.Dataset) -> pd.DataFrame:
         d = ds.sel(exercise=e)
         row = {"exercise": str(e)}
         for g in d["group"].values:
-            row[f"{g} T/B (kPa)"] = (f"{float(d['pressure_kpa'].sel(group=g, chamber='top')):.0f} / "
-                                     f"{float(d['pressure_kpa'].sel(group=g, chamber='bottom')):.0f}")
+            row[f"{g} T/B (kPa)"] = (
+                f"{float(d['pressure_kpa'].sel(group=g, chamber='top')):.0f} / "
+                f"{float(d['pressure_kpa'].sel(group=g, chamber='bottom')):.0f}"
+            )
         row["target MCP/PIP/DIP (deg)"] = " / ".join(f"{v:.0f}" for v in d["target_angle_deg"].values)
         row["predicted (deg)"] = " / ".join(f"{v:.1f}" for v in d["predicted_angle_deg"].values)
         row["reached"] = "yes" if bool(d["achieved"]) else "no"
@@ -199,12 +194,16 @@ def joint_loads_table(ds: xr.Dataset) -> pd.DataFrame:
         for j in ds["joint"].values:
             d = ds.sel(exercise=e, joint=j)
             row[f"{j} target (deg)"] = float(d["target_angle_deg"]) if "target_angle_deg" in d else np.nan
-            row[f"{j} passive (N m)"] = (f"{float(d['passive_moment_nm']):.4f} "
-                                         f"[{float(d['passive_moment_lo_nm']):.4f}, {float(d['passive_moment_hi_nm']):.4f}]")
+            row[f"{j} passive (N m)"] = (
+                f"{float(d['passive_moment_nm']):.4f} "
+                f"[{float(d['passive_moment_lo_nm']):.4f}, {float(d['passive_moment_hi_nm']):.4f}]"
+            )
         rows.append(row)
     row = {"exercise": "active limit"}
     for j in ds["joint"].values:
-        row[f"{j} target (deg)"] = float(ds["active_limit_angle_deg"].sel(joint=j)) if "active_limit_angle_deg" in ds else np.nan
+        row[f"{j} target (deg)"] = (
+            float(ds["active_limit_angle_deg"].sel(joint=j)) if "active_limit_angle_deg" in ds else np.nan
+        )
         row[f"{j} passive (N m)"] = f"{float(ds['active_limit_nm'].sel(joint=j)):.4f}"
     rows.append(row)
     return pd.DataFrame(rows).set_index("exercise")
@@ -212,15 +211,17 @@ def joint_loads_table(ds: xr.Dataset) -> pd.DataFrame:
 
 def speed_accuracy_table(ds: xr.Dataset) -> pd.DataFrame:
     """Per method: wall time, one-off setup time and, per quantity group, the largest error (Pareto marked *)."""
-    from workflow.plots_fidelity import GROUPS, group_errors
 
     rows = []
     for i, m in enumerate(ds["method"].values):
-        row = {"method": str(m), "family": str(ds["family"].values[i]),
-               "wall time (s)": float(ds["wall_time_s"].values[i])}
+        row = {
+            "method": str(m),
+            "family": str(ds["family"].values[i]),
+            "wall time (s)": float(ds["wall_time_s"].values[i]),
+        }
         if "setup_time_s" in ds and float(ds["setup_time_s"].values[i]) > 0:
             row["setup (s)"] = float(ds["setup_time_s"].values[i])
-        for title, prefix, unit in GROUPS:
+        for title, prefix, unit in METHOD_GROUPS:
             e = float(group_errors(ds, prefix).values[i])
             if np.isfinite(e):
                 q = [str(x) for x in ds["quantity"].values if str(x).startswith(prefix)]
@@ -233,61 +234,41 @@ def speed_accuracy_table(ds: xr.Dataset) -> pd.DataFrame:
 
 # name -> (title, [(caption, table function)], dataset attributes quoted as notes)
 TABLES = {
-    "scaling": ("Scale factors against Tables 3-4", [("|ours - paper| per body and axis over the 15 runs", scaling_table)],
-                ("max_abs_error_excluding_paper_inconsistency", "paper_inconsistency")),
+    "scaling": (
+        "Scale factors against Tables 3-4",
+        [("|ours - paper| per body and axis over the 15 runs", scaling_table)],
+        ("max_abs_error_excluding_paper_inconsistency", "paper_inconsistency"),
+    ),
     "musculoskeletal": ("OpenSim backend against the authors' export", [("per response", musculoskeletal_table)], ()),
-    "unit_check": ("FE unit check (Fig. 12 points)", [("per FE model and top pressure, P_B = 0", unit_check_table)], ()),
+    "unit_check": (
+        "FE unit check (Fig. 12 points)",
+        [("per FE model and top pressure, P_B = 0", unit_check_table)],
+        (),
+    ),
     "surrogate_cv": ("Surrogate cross-validation", [("mean over folds", surrogate_cv_table)], ("selection_rule",)),
     "mapping": ("2D-to-3D pressure mapping of Table 8", [("per exercise and group", mapping_table)], ("method",)),
-    "cascade_validation": ("Planned pressures against the paper (Tables 8 and 10)",
-                           [("exercises reached, ours against each of the paper's sets", reached_table),
-                            ("pressures per exercise and chamber", cascade_validation_table)], ("patient",)),
+    "cascade_validation": (
+        "Planned pressures against the paper (Tables 8 and 10)",
+        [
+            ("exercises reached, ours against each of the paper's sets", reached_table),
+            ("pressures per exercise and chamber", cascade_validation_table),
+        ],
+        ("patient",),
+    ),
     "cascade_plan": ("Cascade plan", [("per exercise", cascade_plan_table)], ("patient", "springs")),
-    "speed_accuracy": ("Speed against accuracy", [("per method: the largest error per quantity group "
-                                                   "(* = on the Pareto front of one of its quantities)", speed_accuracy_table)], ()),
-    "joint_loads": ("Joint loads and safety limits", [("passive moment [prediction interval] per exercise; active limit",
-                                                       joint_loads_table)], ("patient", "coded_norm")),
+    "speed_accuracy": (
+        "Speed against accuracy",
+        [
+            (
+                "per method: the largest error per quantity group (* = on the Pareto front of one of its quantities)",
+                speed_accuracy_table,
+            )
+        ],
+        (),
+    ),
+    "joint_loads": (
+        "Joint loads and safety limits",
+        [("passive moment [prediction interval] per exercise; active limit", joint_loads_table)],
+        ("patient", "coded_norm"),
+    ),
 }
-
-
-def write_table(name: str, dataset: str | Path, out: str | Path, title_suffix: str = "") -> Path:
-    """Table ``name`` of `TABLES` from the netCDF file ``dataset`` to the HTML page ``out``."""
-    title, parts, note_attrs = TABLES[name]
-    with open_result(dataset) as ds:
-        ds = ds.load()
-    notes = [f"{a}: {ds.attrs[a]}" for a in note_attrs if a in ds.attrs]
-    notes.append(f"source: {Path(dataset).as_posix()} (git {ds.attrs.get('git_commit', '?')}, "
-                 f"created {ds.attrs.get('created_utc', '?')})")
-    return write_html(out, title + title_suffix, [(cap, fn(ds)) for cap, fn in parts], notes)
-
-
-def fidelity_choices_table(unit_check: str | Path, cv: str | Path, responses: Sequence[str | Path],
-                           loads: Sequence[str | Path], fea_check: str | Path | None = None) -> pd.DataFrame:
-    """Which fidelity each stage used and why, read from the outputs' own attrs (``fidelity``, ``fidelity_reason``)."""
-    rows = []
-
-    def attrs(path):
-        with open_result(path) as d:
-            return dict(d.attrs)
-
-    a = attrs(unit_check)
-    for m in ("2d", "3d"):
-        if f"fidelity_{m}" in a:
-            rows.append({"stage": f"unit check, {m.upper()}", "used": a[f"fidelity_{m}"], "why": a.get(f"fidelity_reason_{m}", "")})
-    for p in responses:
-        a = attrs(p)
-        rows.append({"stage": f"sweep {a.get('fea', '?').upper()}", "used": a.get("fidelity", f"h = {a.get('h_mm', '?')} mm"),
-                     "why": a.get("fidelity_reason", "")})
-    with open_result(cv) as c:
-        for f in c["fea"].values:
-            rows.append({"stage": f"surrogate {str(f).upper()}", "used": str(c["chosen"].sel(fea=f).values),
-                         "why": str(c["choice_reason"].sel(fea=f).values) if "choice_reason" in c else c.attrs.get("selection_rule", "")})
-    for p in loads:
-        a = attrs(p)
-        rows.append({"stage": f"joint loads, patient {a.get('patient', Path(p).parent.name)}", "used": a.get("fidelity", "rsm"),
-                     "why": a.get("fidelity_reason", "")})
-    if fea_check:
-        a = attrs(fea_check)
-        rows.append({"stage": f"FEA check, patient {a.get('patient', '?')}", "used": a.get("fidelity", ""),
-                     "why": a.get("fidelity_reason", "")})
-    return pd.DataFrame(rows).set_index("stage")

@@ -5,7 +5,7 @@ over 1000 vertices to C_CONTIGUOUS", matplotlib's font cache, numexpr's thread
 count) is off: set ``FINGER_REHAB_VERBOSE_LIBS=1`` in the environment to keep
 it.  Each job's log ends with one summary line, e.g.
 ``done: 12 solves, 12 converged, 0 failed, 43.2 s`` (solves are counted from
-the lines that report them, see :mod:`workflow.runlog`).
+the lines that report them, see :mod:`workflow.common.runlog`).
 """
 
 from __future__ import annotations
@@ -17,17 +17,33 @@ import sys
 import time
 from pathlib import Path
 
-from workflow.provenance import CorruptInputError
+from workflow.common.provenance import CorruptInputError
 
 #: Libraries whose chatter would bury the workflow's own lines, and the least level they still log: scikit-fem
 #: warns at WARNING that it copies a mesh to C order (a speed note, not a problem of the run).
-QUIET_LIBRARIES = {"skfem": logging.ERROR, **{name: logging.WARNING for name in (
-    "matplotlib", "numexpr", "PIL", "fontTools", "h5py", "urllib3", "mlflow", "alembic", "git", "numba")}}
+QUIET_LIBRARIES = {
+    "skfem": logging.ERROR,
+    **{
+        name: logging.WARNING
+        for name in (
+            "matplotlib",
+            "numexpr",
+            "PIL",
+            "fontTools",
+            "h5py",
+            "urllib3",
+            "mlflow",
+            "alembic",
+            "git",
+            "numba",
+        )
+    },
+}
 VERBOSE_ENV = "FINGER_REHAB_VERBOSE_LIBS"
 
 
 class _SolveTally(logging.Handler):
-    """Counts the solves reported by records carrying ``extra=workflow.runlog.solved(...)``."""
+    """Counts the solves reported by records carrying ``extra=workflow.common.runlog.solved(...)``."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -40,8 +56,10 @@ class _SolveTally(logging.Handler):
     def summary(self) -> str:
         if not self.solves:
             return ""
-        return (f"{self.solves} solve{'s' if self.solves != 1 else ''}, {self.solves - self.failed} converged, "
-                f"{self.failed} failed, ")
+        return (
+            f"{self.solves} solve{'s' if self.solves != 1 else ''}, {self.solves - self.failed} converged, "
+            f"{self.failed} failed, "
+        )
 
 
 def setup_logging(snakemake) -> logging.Logger:  # noqa: ANN001 - Snakemake's object
@@ -49,7 +67,7 @@ def setup_logging(snakemake) -> logging.Logger:  # noqa: ANN001 - Snakemake's ob
 
     Returns the logger named after the rule.  An uncaught exception is logged
     with its traceback before the job fails; a damaged input file
-    (:class:`workflow.provenance.CorruptInputError`) with its one-line message only.
+    (:class:`workflow.common.provenance.CorruptInputError`) with its one-line message only.
     """
     handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
     if snakemake.log:
@@ -79,8 +97,9 @@ def setup_logging(snakemake) -> logging.Logger:  # noqa: ANN001 - Snakemake's ob
 
     def _summary():
         state = "failed after" if failed else "done:"
-        logger.log(logging.ERROR if failed else logging.INFO, "%s %s%.1f s", state, tally.summary(),
-                   time.perf_counter() - t0)
+        logger.log(
+            logging.ERROR if failed else logging.INFO, "%s %s%.1f s", state, tally.summary(), time.perf_counter() - t0
+        )
 
     sys.excepthook = _hook
     atexit.register(_summary)

@@ -1,4 +1,4 @@
-from workflow.pipeline import write_selected_moments
+from workflow.musculoskeletal.entry import write_selected_moments
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821

@@ -1,4 +1,4 @@
-from workflow.pipeline import write_moments_from_table
+from workflow.musculoskeletal.entry import write_moments_from_table
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821

@@ -1,4 +1,4 @@
-from workflow.report_tables import write_table
+from workflow.reporting.entry import write_table
 from workflow.scripts._common import setup_logging
 
 log = setup_logging(snakemake)  # noqa: F821

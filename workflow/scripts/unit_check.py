@@ -1,8 +1,7 @@
-
-from workflow import fem
-from workflow.fidelity import apply_fem_choice
+from workflow.actuator import entry_fem
+from workflow.common.fidelity_choice import apply_fem_choice
+from workflow.common.provenance import open_result
 from workflow.scripts._common import setup_logging
-from workflow.provenance import open_result
 
 setup_logging(snakemake)  # noqa: F821
 p = snakemake.params  # noqa: F821
@@ -13,5 +12,12 @@ per_model, attrs = {}, {}
 for m in p.actuator.get("unit_check", {}).get("models", ["2d", "3d"]):
     per_model[m], f = apply_fem_choice(p.actuator, choice, m)
     attrs.update({f"{k}_{m}": v for k, v in f.items()})
-fem.write_unit_check(snakemake.output.nc, snakemake.output.vtu, p.actuator, rule=snakemake.rule,  # noqa: F821
-                     config_slice={"config": p.config_slice, **attrs}, model_actuators=per_model, attrs=attrs)
+entry_fem.write_unit_check(
+    snakemake.output.nc,
+    snakemake.output.vtu,
+    p.actuator,
+    rule=snakemake.rule,  # noqa: F821
+    config_slice={"config": p.config_slice, **attrs},
+    model_actuators=per_model,
+    attrs=attrs,
+)

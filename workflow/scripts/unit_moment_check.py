@@ -1,5 +1,5 @@
+from workflow.actuator.entry import write_moment_check
 from workflow.scripts._common import setup_logging
-from workflow.unit_moment_check import write_moment_check
 
 setup_logging(snakemake)  # noqa: F821
 write_moment_check(

@@ -1,4 +1,4 @@
-from workflow.pipeline import write_scaling_validation
+from workflow.doe.entry import write_scaling_validation
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821

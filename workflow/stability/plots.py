@@ -22,9 +22,13 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 
 __all__ = ["plot_failures", "plot_locking", "plot_penetration", "plot_coverage", "plot_design_feasibility"]
 
-#: status code -> (marker, colour, label) of the sweep's STATUS_FLAGS
-_STATUS_STYLE = {0: ("o", "tab:green", "converged"), 1: ("X", "tab:red", "diverged"),
-                 2: (".", "0.55", "not reached"), 3: ("s", "k", "solver error")}
+#: status code -> (marker, colour, label) of the sweep status (SWEEP_SAMPLE_STATUS)
+_STATUS_STYLE = {
+    0: ("o", "tab:green", "converged"),
+    1: ("X", "tab:red", "diverged"),
+    2: (".", "0.55", "not reached"),
+    3: ("s", "k", "solver error"),
+}
 
 
 def _save(fig, out) -> None:
@@ -58,9 +62,16 @@ def plot_failures(ds: xr.Dataset, out) -> None:
             for mirrored in (False, True):
                 sel = on & (st == code) & (mir == mirrored)
                 if sel.any():
-                    ax.scatter(ds["p_top_kpa"].values[sel], ds["p_bottom_kpa"].values[sel], marker=mk, s=28,
-                               facecolors="none" if mirrored else col, edgecolors=col, linewidths=1.0,
-                               label=lab if not mirrored else None)
+                    ax.scatter(
+                        ds["p_top_kpa"].values[sel],
+                        ds["p_bottom_kpa"].values[sel],
+                        marker=mk,
+                        s=28,
+                        facecolors="none" if mirrored else col,
+                        edgecolors=col,
+                        linewidths=1.0,
+                        label=lab if not mirrored else None,
+                    )
         c = ds["failure_count"].sel(fe_method=m).values
         ax.set_title(f"{m}\n{c[0]}/{c.sum()} solved samples converged", fontsize=7.5)
         ax.set_xlim(-0.04 * pmax, 1.04 * pmax)
@@ -87,13 +98,16 @@ def plot_locking(ds: xr.Dataset, out) -> None:
     a.set_ylabel("free bending angle per unit (deg)")
     a.axhline(0, color="0.7", lw=0.6)
     a.legend(fontsize=8)
-    a.set_title(f"2D unit, h = {ds.attrs['locking_h_mm']:g} mm, P_T = {ds.attrs['locking_p_top_kpa']:g} kPa, "
-                "no contact", fontsize=9)
+    a.set_title(
+        f"2D unit, h = {ds.attrs['locking_h_mm']:g} mm, P_T = {ds.attrs['locking_p_top_kpa']:g} kPa, no contact",
+        fontsize=9,
+    )
     r = ds["locking_ratio"].values
     b.semilogx(k, r, "o-", color="tab:red", label="volumetric: plain Q1 / mean dilatation")
     if "locking_shear_ratio" in ds:
-        b.semilogx(k, ds["locking_shear_ratio"].values, "s--", color="tab:blue",
-                   label="shear: plain Q1 paper / enhanced paper")
+        b.semilogx(
+            k, ds["locking_shear_ratio"].values, "s--", color="tab:blue", label="shear: plain Q1 paper / enhanced paper"
+        )
     b.axhline(1, color="0.6", lw=0.8, ls=":")
     b.set_xlabel("K / mu0")
     b.set_ylabel("angle ratio")
@@ -123,11 +137,24 @@ def plot_penetration(ds: xr.Dataset, out) -> None:
     pen = ds["max_penetration_mm"].values
     ok = (ds["status"].values == 0) & np.isfinite(pen) & (pen > 0)
     if ok.any():
-        sc = b.scatter(ds["p_top_kpa"].values[ok], ds["p_bottom_kpa"].values[ok], c=pen[ok] / bound, cmap="viridis",
-                       s=30, vmin=0, vmax=max(1.0, float(np.nanmax(pen[ok] / bound))))
+        sc = b.scatter(
+            ds["p_top_kpa"].values[ok],
+            ds["p_bottom_kpa"].values[ok],
+            c=pen[ok] / bound,
+            cmap="viridis",
+            s=30,
+            vmin=0,
+            vmax=max(1.0, float(np.nanmax(pen[ok] / bound))),
+        )
         over = ok & (pen > bound)
-        b.scatter(ds["p_top_kpa"].values[over], ds["p_bottom_kpa"].values[over], s=80, facecolors="none",
-                  edgecolors="tab:red", label="above bound")
+        b.scatter(
+            ds["p_top_kpa"].values[over],
+            ds["p_bottom_kpa"].values[over],
+            s=80,
+            facecolors="none",
+            edgecolors="tab:red",
+            label="above bound",
+        )
         fig.colorbar(sc, ax=b, label="penetration / bound")
         if over.any():
             b.legend(fontsize=8, loc="upper left")
@@ -157,18 +184,33 @@ def plot_coverage(ds: xr.Dataset, sweeps: Mapping[str, xr.Dataset], out) -> None
         if "query_fea" in ds and ds.sizes.get("query", 0):
             on = ds["query_fea"].values == f
             tr = ds["query_trusted"].values
-            ax.plot(ds["query_p_top_kpa"].values[on & tr], ds["query_p_bottom_kpa"].values[on & tr], "o", mfc="none",
-                    mec="tab:blue", ms=7, label="planned pair, inside")
+            ax.plot(
+                ds["query_p_top_kpa"].values[on & tr],
+                ds["query_p_bottom_kpa"].values[on & tr],
+                "o",
+                mfc="none",
+                mec="tab:blue",
+                ms=7,
+                label="planned pair, inside",
+            )
             if (on & ~tr).any():
-                ax.plot(ds["query_p_top_kpa"].values[on & ~tr], ds["query_p_bottom_kpa"].values[on & ~tr], "^",
-                        color="tab:orange", ms=8, label="planned pair, flagged")
+                ax.plot(
+                    ds["query_p_top_kpa"].values[on & ~tr],
+                    ds["query_p_bottom_kpa"].values[on & ~tr],
+                    "^",
+                    color="tab:orange",
+                    ms=8,
+                    label="planned pair, flagged",
+                )
         ax.set_title(f"{f.upper()} surrogate: {float(g['covered_fraction']):.0%} of the square covered", fontsize=9)
         ax.set_xlabel("P_T (kPa)")
         ax.set_ylabel("P_B (kPa)")
         ax.set_aspect("equal")
         ax.legend(fontsize=7, loc="upper right", framealpha=0.8)
-    fig.suptitle("Sampled region (green: hull of converged samples; red: nearest sample failed; white: extrapolation)",
-                 fontsize=9)
+    fig.suptitle(
+        "Sampled region (green: hull of converged samples; red: nearest sample failed; white: extrapolation)",
+        fontsize=9,
+    )
     fig.tight_layout()
     _save(fig, out)
 
@@ -177,12 +219,16 @@ def plot_design_feasibility(ds: xr.Dataset, design: np.ndarray, out) -> None:
     """RSM prediction variance against ||x||, patients in coded space, exercises reached per patient."""
     fig, (a, b, c) = plt.subplots(1, 3, figsize=(14, 4.2), gridspec_kw={"width_ratios": [1.1, 1, 1.1]})
     for d in ds["direction"].values:
-        a.semilogy(ds["radius"].values, ds["prediction_variance_radial"].sel(direction=d).values, label=f"{d} direction")
+        a.semilogy(
+            ds["radius"].values, ds["prediction_variance_radial"].sel(direction=d).values, label=f"{d} direction"
+        )
     a.axvline(1.0, color="k", ls="--", lw=1, label="design sphere ||x|| = 1")
     a.axvline(float(ds.attrs["ccd_corner_norm"]), color="0.5", ls=":", lw=1, label="CCD corners")
     for p in ds["patient"].values:
         n = float(ds["coded_norm"].sel(patient=p))
-        a.axvline(n, color="tab:red" if not bool(ds["in_design_range"].sel(patient=p)) else "tab:green", lw=0.8, alpha=0.7)
+        a.axvline(
+            n, color="tab:red" if not bool(ds["in_design_range"].sel(patient=p)) else "tab:green", lw=0.8, alpha=0.7
+        )
         a.text(n, 0.03, str(p), rotation=90, fontsize=7, va="bottom", ha="right", transform=a.get_xaxis_transform())
     a.set_xlabel("||x|| (coded)")
     a.set_ylabel("scaled prediction variance N Var/sigma^2")

@@ -1,0 +1,191 @@
+"""Rule entry points of the actuator stage's file-level steps: merge the sweep
+shards, cross-validate and fit the surrogates, map Table 8 to 2D, run the
+end-moment check.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+from workflow.actuator.mapping import mapping_dataset, read_planned_pressures
+from workflow.actuator.moment_check import moment_check
+from workflow.actuator.plots import plot_mapping, plot_moment_check, plot_response, plot_surrogate_cv
+from workflow.actuator.pressure_limit import PressureLimit, smallest
+from workflow.actuator.surrogates import Surrogate, fit_surrogate, load_surrogate, save_surrogate, surrogate_cv
+from workflow.actuator.sweep import merge_shards
+from workflow.common.provenance import open_result, write_dataset
+
+__all__ = ["write_response", "write_surrogate_cv", "write_surrogate", "write_mapping", "write_moment_check"]
+
+log = logging.getLogger(__name__)
+
+
+def write_response(
+    shards: Sequence[str | Path],
+    out: str | Path,
+    *,
+    fea: str,
+    sweep_cfg: Mapping[str, Any],
+    config_slice: Any,
+    rule: str = "sweep_merge",
+) -> xr.Dataset:
+    """Merge the shard files of FE model ``fea`` into ``response_{fea}.nc`` (CONTRACT.md)."""
+    ds = merge_shards(shards, n_ratios=sweep_cfg["n_ratios"], n_pressures=sweep_cfg["n_pressures"])
+    solved = ~ds["mirrored"].values
+    n_ok = int(np.count_nonzero(ds["converged"].values[solved]))
+    wall = float(ds["wall_time_s"].sum())
+    log.info(
+        "%s sweep: %d points (%d solved, %d converged, %d mirrored), %.1f s of solver time",
+        fea,
+        ds.sizes["point"],
+        int(solved.sum()),
+        n_ok,
+        int((~solved).sum()),
+        wall,
+    )
+    ds.attrs.update(
+        {
+            "fea": fea,
+            "p_max_kpa": float(sweep_cfg["p_max_kpa"]),
+            "n_ratios": int(sweep_cfg["n_ratios"]),
+            "n_pressures": int(sweep_cfg["n_pressures"]),
+            "solver_wall_time_s": wall,
+        }
+    )
+    first = shards[0] if isinstance(shards[0], xr.Dataset) else open_result(shards[0])
+    # the mesh the shards were solved on, and why
+    ds.attrs.update({k: v for k, v in first.attrs.items() if k in ("h_mm", "contact") or k.startswith("fidelity")})
+    write_dataset(
+        ds,
+        out,
+        rule=rule,
+        config_slice=config_slice,
+        title=f"{fea.upper()} unit response over (P_T, P_B): free angle and blocked moment per unit",
+    )
+    return ds
+
+
+def write_surrogate_cv(
+    response_2d: str | Path,
+    response_3d: str | Path,
+    out: str | Path,
+    *,
+    k: int,
+    folds: int,
+    random_state: int,
+    regressors: Sequence[str],
+    config_slice,
+    rule: str = "surrogate_cv",
+    plot: str | Path | None = None,
+    tolerance: float | None = None,
+) -> xr.Dataset:
+    """CV of the regressors on both sweeps -> ``surrogate_cv.nc`` (and the CV chart)."""
+    responses = {fea: open_result(p) for fea, p in (("2d", response_2d), ("3d", response_3d))}
+    ds = surrogate_cv(
+        responses, regressors=regressors, k=k, folds=folds, random_state=random_state, tolerance=tolerance
+    )
+    write_dataset(
+        ds,
+        out,
+        rule=rule,
+        config_slice=config_slice,
+        title="Cross-validation of surrogates of the unit's angle and moment over (P_T, P_B)",
+    )
+    if plot is not None:
+        plot_surrogate_cv(ds, plot)
+    return ds
+
+
+def write_surrogate(
+    response: str | Path,
+    cv: str | Path,
+    out: str | Path,
+    *,
+    fea: str,
+    k: int,
+    random_state: int,
+    plot: str | Path | None = None,
+) -> Surrogate:
+    """Fit the regressor the CV chose for ``fea`` on all its samples; save it (and the Fig. 11-like plot)."""
+    resp = open_result(response)
+    with open_result(cv) as c:
+        chosen = str(c["chosen"].sel(fea=fea).values)
+        why = str(c["choice_reason"].sel(fea=fea).values) if "choice_reason" in c else ""
+    s = fit_surrogate(resp, chosen, fea=fea, k=k, random_state=random_state)
+    s.meta.update({"fidelity": chosen, "fidelity_reason": why})
+    log.info("%s: fitted %s on %d samples (%s)", fea, chosen, s.n_samples, why)
+    save_surrogate(s, out)
+    if plot is not None:
+        plot_response(resp, s, plot, fea=fea)
+    return s
+
+
+def write_mapping(
+    planned_csv: str | Path,
+    surrogate_3d: str | Path,
+    surrogate_2d: str | Path,
+    out: str | Path,
+    *,
+    config_slice,
+    rule: str = "mapping_2d3d",
+    plot: str | Path | None = None,
+    material_limit=None,
+) -> xr.Dataset:
+    """Map Table 8 with the fitted 3D and 2D surrogates -> ``mapping_2d3d.nc`` (and the Fig. 17-like plot).
+
+    The 2D grid's edge is the smaller of the 2D surrogate's training range (its
+    sweep's p_max) and the silicone's limit ``material_limit``
+    (:func:`workflow.actuator.pressure_limit.material_limit`): no 2D pair beyond either.
+    """
+
+    s3, s2 = load_surrogate(surrogate_3d), load_surrogate(surrogate_2d)
+    limit = smallest(material_limit, PressureLimit(float(s2.p_max_kpa), "the range the 2D surrogate's sweep sampled"))
+    ds = mapping_dataset(
+        read_planned_pressures(planned_csv),
+        s3.angle_deg,
+        s2.angle_deg,
+        p_max_2d_kpa=limit.kpa,
+        p_max_3d_kpa=s3.p_max_kpa,
+    )
+    ds.attrs["surrogate_3d"] = s3.regressor
+    ds.attrs["surrogate_2d"] = s2.regressor
+    ds.attrs["p_limit_source"] = limit.source
+    write_dataset(
+        ds,
+        out,
+        rule=rule,
+        config_slice=config_slice,
+        title="2D pressures of the same ratio and free angle as the planned 3D pressures (Table 8)",
+    )
+    if plot is not None:
+        plot_mapping(ds, plot)
+    return ds
+
+
+def write_moment_check(
+    nc_path: str | Path,
+    plot_path: str | Path,
+    actuator: Mapping,
+    unit_model: Mapping | None = None,
+    *,
+    rule: str = "unit_moment_check",
+    config_slice=None,
+) -> xr.Dataset:
+    """Run the check with ``actuator.moment_check``; write the dataset and plot."""
+
+    ds = moment_check(actuator, actuator.get("moment_check"))
+    write_dataset(
+        ds,
+        nc_path,
+        rule=rule,
+        config_slice=config_slice if config_slice is not None else dict(actuator),
+        title="PNA unit under an end moment: the unit model's spring per end hold vs a unit inside a chain",
+        source="workflow.fem (three-chamber unit: free, blocked; chain cut at gap centres: free, end rotations)",
+    )
+    plot_moment_check(ds, plot_path)
+    return ds

@@ -1,0 +1,106 @@
+"""Rule entry points of the actuator's FEA (``sweep_shard``, ``unit_check``).
+
+Apart from :mod:`.entry` so that these rules' inputs (the code they run) hold
+the sweep and the FE engine only: editing the surrogates or the mapping does not
+rerun minutes of FEA.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+import xarray as xr
+
+from workflow.actuator.fe_solver import make_solver
+from workflow.actuator.sweep import run_shard
+from workflow.common.provenance import write_dataset
+from workflow.common.vtu import write_vtu
+from workflow.fem._config import unit_check, unit_mesh_from_config
+
+__all__ = ["write_unit_check", "write_shard"]
+
+
+def write_unit_check(
+    nc_path: str | Path,
+    vtu_path: str | Path,
+    actuator: Mapping,
+    *,
+    rule: str = "unit_check",
+    config_slice=None,
+    model_actuators: Mapping[str, Mapping] | None = None,
+    attrs: Mapping | None = None,
+) -> None:
+    """Run ``unit_check`` with the config's points and write the dataset and the deformed 3D unit.
+
+    ``model_actuators``: a config per model (``{"2d": ..., "3d": ...}``, e.g.
+    the meshes a fidelity study chose), else ``actuator`` for all; ``attrs``
+    are added to the dataset.  If the 3D model is not requested or its ray
+    fails, the .vtu holds the undeformed 3D mesh with zero displacement (and
+    the dataset's status says why).
+    """
+
+    uc = dict(actuator.get("unit_check", {}))
+    models = tuple(uc.get("models", ("2d", "3d")))
+    p_top = uc.get("p_top_kpa", (60.0, 180.0, 300.0))
+    if model_actuators:
+        parts = [unit_check(model_actuators.get(m, actuator), (m,), p_top) for m in models]
+        ds = xr.concat([p[0] for p in parts], dim="model")
+        deformed = next((p[1] for p in parts if p[1] is not None), None)
+        actuator = model_actuators.get("3d", actuator)
+    else:
+        ds, deformed = unit_check(actuator, models, p_top)
+    ds.attrs.update({k: str(v) for k, v in dict(attrs or {}).items()})
+    write_dataset(
+        ds,
+        nc_path,
+        rule=rule,
+        config_slice=config_slice if config_slice is not None else dict(actuator),
+        title="PNA unit check: free bending angle and blocked moment at P_T = 60, 180, 300 kPa (P_B = 0)",
+        source="workflow.fem (scikit-fem; Q1/P0 silicone, enhanced-strain paper layer, follower pressure, penalty self-contact)",
+    )
+    if deformed is None:
+        mesh = unit_mesh_from_config(actuator, 3)
+        deformed = (mesh, np.zeros(mesh.mesh.p.size))
+    mesh, u = deformed
+    write_vtu(mesh.mesh, u, vtu_path, cell_data={"material": mesh.material})
+
+
+def write_shard(
+    out: str | Path,
+    *,
+    fea: str,
+    shard: int,
+    sweep_cfg: Mapping[str, Any],
+    actuator_cfg: Mapping[str, Any],
+    config_slice: Any,
+    rule: str = "sweep_shard",
+    solver: Callable | None = None,
+    attrs: Mapping[str, Any] | None = None,
+) -> xr.Dataset:
+    """Solve shard ``shard`` of FE model ``fea`` and write it (atomically) to ``out``.
+
+    ``sweep_cfg`` is the model's ``sweep`` config (p_max_kpa, n_ratios,
+    n_pressures, n_shards); ``solver`` defaults to `make_solver(fea, actuator_cfg)`;
+    ``attrs`` (e.g. the fidelity used and why) go into the file and on to the merged response.
+    """
+    solver = make_solver(fea, actuator_cfg) if solver is None else solver
+    ds = run_shard(
+        solver,
+        shard=int(shard),
+        p_max_kpa=sweep_cfg["p_max_kpa"],
+        n_ratios=sweep_cfg["n_ratios"],
+        n_pressures=sweep_cfg["n_pressures"],
+        n_shards=sweep_cfg["n_shards"],
+    )
+    ds.attrs["fea"] = fea
+    ds.attrs["shard"] = int(shard)
+    mesh = dict(actuator_cfg.get("mesh", {}))
+    ds.attrs["h_mm"] = float(mesh.get(f"h_{fea}_mm", 1.0 if fea == "2d" else 2.0))
+    ds.attrs["contact"] = int(bool(dict(actuator_cfg.get("contact", {})).get("enabled", True)))
+    ds.attrs.update({k: str(v) for k, v in dict(attrs or {}).items()})
+    write_dataset(
+        ds, out, rule=rule, config_slice=config_slice, title=f"{fea.upper()} unit pressure sweep, shard {int(shard)}"
+    )
+    return ds

@@ -1,0 +1,158 @@
+"""Rule entry points of the cascade stage (``cascade_plan``,
+``validate_cascade``): read a patient's loads and the unit model, plan every
+exercise, write the plan and its poses plot; compare the plans with Tables 8
+and 10.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import xarray as xr
+
+from workflow.actuator.sampled_region import flag_pressure_table
+from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
+from workflow.cascade.planning import plan_exercise, plans_dataset
+from workflow.cascade.plots import plot_poses, plot_validation
+from workflow.cascade.validation import compare_pressures, compare_unit_moments, read_pressure_table
+from workflow.common.constants import JOINTS
+from workflow.common.provenance import open_result, write_dataset
+
+__all__ = ["write_cascade_plan", "write_cascade_validation"]
+
+
+def write_cascade_plan(
+    patient_name: str,
+    patient: Mapping[str, Any],
+    unit: Any,
+    *,
+    ccd_nc: str,
+    moments_nc: str,
+    joint_loads_nc: str,
+    out_nc: str,
+    out_png: str | None,
+    cascade_cfg: Mapping[str, Any],
+    anthropometry: Mapping[str, Any],
+    config_slice: Any,
+    rule: str = "cascade_plan",
+    sampled_region: Any = None,
+    notes: Mapping[str, str] | None = None,
+    material_limit: Any = None,
+):
+    """Build the patient's finger and actuator, plan every exercise, write the plan (and poses plot).
+
+    ``unit`` is the unit response object (see :class:`UnitResponse`);
+    ``cascade_cfg`` the config's ``cascade`` section; ``material_limit`` the
+    silicone's pressure limit (:func:`workflow.actuator.pressure_limit.material_limit`):
+    no planned pressure exceeds :func:`plan_limit`, recorded in the attrs
+    ``p_limit_kpa`` and ``p_limit_source``.  ``sampled_region`` (a
+    `workflow.stability.SampledRegion` of the surrogate's sweep), if given,
+    flags planned (P_T, P_B) pairs outside the converged FE samples or nearest
+    a failed one: ``pressure_in_sampled_region`` and a warning in the log.
+    ``notes`` go into the attrs (e.g. the surrogate's fidelity and why).
+    """
+    import logging
+    import time
+
+    log = logging.getLogger(__name__)
+    c = cascade_cfg
+    loads = open_result(joint_loads_nc)
+    fing, spring_note = patient_finger(
+        patient, loads, open_result(moments_nc), open_result(ccd_nc), cascade_cfg=c, anthropometry=anthropometry
+    )
+    finger_name = str(patient.get("finger", "F3"))
+    model = patient_cascade(fing, unit, c)
+    limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
+    targets = {
+        str(e): loads["target_angle_deg"].sel(exercise=e, joint=list(JOINTS)).values for e in loads["exercise"].values
+    }
+    log.info(
+        "patient %s: units per group %s, finger masses %s kg (%s); springs: %s",
+        patient_name,
+        model.n_per_group,
+        np.round(fing.masses_kg, 4),
+        fing.mass_source,
+        spring_note,
+    )
+    limit = plan_limit(c, unit, material_limit)
+    log.info("patient %s: every planned pressure <= %s", patient_name, limit)
+    t0 = time.perf_counter()
+    plans = []
+    for name, t in targets.items():
+        p = plan_exercise(model, t, exercise=name, **plan_options(c, limits, limit))
+        if np.any(p.pressures_kpa > limit.kpa):  # the search is bounded: this is a bug, not a plan to write
+            raise RuntimeError(f"patient {patient_name} {name}: planned {p.pressures_kpa.max():.1f} kPa above {limit}")
+        log.info(
+            "%s: %s pressures %s kPa, predicted %s deg (target %s) %s",
+            name,
+            "reached" if p.achieved else "NOT reached",
+            np.round(p.pressures_kpa, 1),
+            np.round(p.equilibrium.joint_angles_deg, 1),
+            t,
+            p.reason,
+        )
+        plans.append(p)
+    ds = plans_dataset(
+        model,
+        plans,
+        tol_deg=c["tolerance_deg"],
+        active_limits_nm=limits,
+        notes={
+            "patient": patient_name,
+            "finger": finger_name,
+            "springs": spring_note,
+            "planning_wall_time_s": round(time.perf_counter() - t0, 3),
+            "p_limit_kpa": limit.kpa,
+            "p_limit_source": limit.source,
+            **dict(notes or {}),
+        },
+    )
+    if sampled_region is not None:
+        # the surrogate is an extrapolation outside its samples: flag, do not stop
+
+        ds["pressure_in_sampled_region"], msgs = flag_pressure_table(
+            ds["pressure_kpa"], sampled_region, label=f"patient {patient_name}: "
+        )
+        for m in msgs:
+            log.warning(m)
+    write_dataset(
+        ds, out_nc, rule=rule, config_slice=config_slice, title=f"Cascade pressure plan of patient {patient_name}"
+    )
+    if out_png:
+        plot_poses(model, plans, out_png, title=f"patient {patient_name}")
+    return ds
+
+
+def write_cascade_validation(
+    plan_nc: str | Path,
+    tables: Mapping[str, str | Path],
+    out_nc: str | Path,
+    *,
+    config_slice,
+    rule: str = "validate_cascade",
+    plot: str | Path | None = None,
+    rel_floor_kpa: float = 10.0,
+    table07: str | Path | None = None,
+    dummy_plan_nc: str | Path | None = None,
+) -> xr.Dataset:
+    """Read the mean finger's plan and the paper's tables, write ``results/validation/cascade.nc``.
+
+    ``tables``: {name: pressure table CSV} (Tables 8 and 10); ``table07``: the
+    unit-moment targets, compared when given; ``dummy_plan_nc``: the PLA
+    dummy finger's plan, compared with ``table10`` (the paper's experiment).
+    """
+
+    plan = open_result(plan_nc)
+    plans = {"table10": open_result(dummy_plan_nc)} if dummy_plan_nc and "table10" in tables else None
+    ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa, plans)
+    if table07 is not None:
+        ds = ds.merge(compare_unit_moments(plan, table07))
+    ds.attrs["patient"] = str(plan.attrs.get("patient", ""))
+    write_dataset(
+        ds, out_nc, rule=rule, config_slice=config_slice, title="Planned pressures against the paper's Tables 8 and 10"
+    )
+    if plot:
+        plot_validation(ds, plot)
+    return ds

@@ -1,0 +1,341 @@
+"""Planning the pressures of each exercise on the reduced-order cascade.
+
+Per exercise, the moments the actuator must supply at the target pose follow
+directly (``m*_X = spring_X(theta*_X) - G_X(theta*)``, the paper's Table 7
+logic).  Per span, a grid search (no gradients, so piecewise-constant
+surrogates such as KNN work) finds the pressures of least sum of squares whose
+bend under ``m*_X`` lies within ``tol - margin`` of the target; the coupled
+forward model then checks the pose, the angle tolerance and the active safety
+limits (``|m_X| <= limit_X``), halving the span goal when the pose drifts out.
+``P_CMC`` may be tied to ``P_MCP`` as in all the paper's plans.
+
+Pressures kPa, angles deg, moments N m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from workflow.cascade.model import (
+    SPANS,
+    CascadeModel,
+    Equilibrium,
+    _required_moments,
+    _span_angles_deg,
+    _strap_compliance,
+    pressures_table,
+    solve_equilibrium,
+)
+from workflow.common.constants import CASCADE_EQUILIBRIUM_STATUS, CHAMBERS, GROUPS, JOINTS, PRESSURE_NAMES
+
+__all__ = ["Plan", "plan_exercise", "plan_patient", "plans_dataset"]
+
+
+# --------------------------------------------------------------------------
+# Planning
+# --------------------------------------------------------------------------
+@dataclass
+class Plan:
+    """Planned pressures for one exercise and what the forward model predicts.
+
+    ``required_moments_nm``: the span moments that hold the target pose (the
+    Table-7-like unit moment targets); ``target_unit_angles_deg``: per group,
+    the unit angle at the target pose under the planned pressures.
+    """
+
+    exercise: str
+    target_deg: np.ndarray
+    pressures_kpa: np.ndarray
+    equilibrium: Equilibrium
+    achieved: bool
+    reason: str
+    required_moments_nm: np.ndarray
+    target_unit_angles_deg: np.ndarray
+
+
+def _span_plan(
+    model, joint: int, m_req: float, target: float, goal: float, p_max: float, tie: bool, n_coarse: int = 61
+) -> tuple[dict[int, float], float]:
+    """Least-squares pressures of one span by grid search (no gradients, so a
+    piecewise-constant surrogate such as KNN works too).
+
+    Returns {index into the eight pressures: kPa} and the bend error (deg) at
+    the target pose.  Feasible: the least sum of squares with
+    ``|bend - target| <= goal``; otherwise the pressures closest to the target.
+    """
+    groups = [GROUPS.index(g) for g in SPANS[JOINTS[joint]]]
+    idx = [2 * g + c for g in groups for c in (0, 1)]
+    if tie and joint == 0:
+        idx = [2, 3]  # MCP's pair drives CMC too
+    k = len(idx)
+    counts = model.span_counts()[joint]
+    comp = np.rad2deg(_strap_compliance(model)[joint] * m_req)
+
+    def bend(P):  # P (n, k) kPa -> span bend error (n,)
+        p8 = np.zeros((P.shape[0], 8))
+        p8[:, idx] = P
+        if tie and joint == 0:
+            p8[:, 0:2] = p8[:, 2:4]
+        out = np.full(P.shape[0], comp - target)
+        for g in range(4):
+            if counts[g]:
+                th = model.unit.angle_deg(p8[:, 2 * g], p8[:, 2 * g + 1], np.full(P.shape[0], m_req))
+                out += counts[g] * np.asarray(th, float)
+        return out
+
+    def search(lo, hi, n):
+        axes = [np.linspace(l, h, n) for l, h in zip(lo, hi)]
+        P = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, k)
+        e = bend(P)
+        ok = np.abs(e) <= goal
+        if np.any(ok):
+            i = np.flatnonzero(ok)[np.argmin(np.sum(P[ok] ** 2, axis=1))]
+            return P[i], float(e[i]), True
+        i = int(np.lexsort((np.sum(P**2, axis=1), np.round(np.abs(e), 9)))[0])
+        return P[i], float(e[i]), False
+
+    n = n_coarse if k == 2 else max(9, int(round(n_coarse**0.5)))
+    step = p_max / (n - 1)
+    P, e, feas = search(np.zeros(k), np.full(k, p_max), n)
+    for _ in range(3):  # refine around the best point
+        lo, hi = np.maximum(P - step, 0.0), np.minimum(P + step, p_max)
+        n_f = 21 if k == 2 else 7
+        P, e, feas = search(lo, hi, n_f)
+        step = step * 2 / (n_f - 1)
+    return dict(zip(idx, P)), e
+
+
+def plan_exercise(
+    model: CascadeModel,
+    target_deg: Sequence[float],
+    *,
+    exercise: str = "",
+    tol_deg: float = 5.0,
+    active_limits_nm: Sequence[float] | None = None,
+    p_max_kpa: float = 300.0,
+    tie_cmc_mcp: bool = True,
+    margin_deg: float = 0.25,
+    max_rounds: int = 5,
+) -> Plan:
+    """Pressures for one exercise (see the module docstring).
+
+    Per span, the pressures of least sum of squares whose bend under the
+    target-pose moment is within ``tol - margin`` of the target; then the
+    coupled forward model checks the pose.  If a joint lands outside the
+    tolerance (the pose, not the target, sets the moments), the plan is
+    repeated -- with the moments of the reached pose for spans that cannot
+    reach their target, else with half the span goal -- at most ``max_rounds``
+    times, and the best round is kept.  Angles deg, moments N m, pressures kPa.
+    """
+    target = np.asarray(target_deg, float)
+    limits = None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float))
+    m_req, *_ = _required_moments(model, target)
+    goal = tol_deg - margin_deg
+    # Pose at which the span moments are evaluated: the target, except for
+    # joints whose span cannot reach it -- those stay where the forward model
+    # puts them, so the other spans plan for the moments they will really see.
+    theta_eval = target.copy()
+    best = None
+    for _ in range(max_rounds):
+        m_eval, *_ = _required_moments(model, theta_eval)
+        p8 = np.zeros(8)
+        span_err = np.zeros(3)
+        for j in range(3):
+            sol, span_err[j] = _span_plan(model, j, m_eval[j], target[j], goal, p_max_kpa, tie_cmc_mcp)
+            for i, v in sol.items():
+                p8[i] = v
+        if tie_cmc_mcp:
+            p8[0:2] = p8[2:4]
+        eq = solve_equilibrium(model, p8, x0_deg=theta_eval)
+        e = np.abs(eq.joint_angles_deg - target) if eq.converged else np.full(3, np.inf)
+        score = (int(np.sum(e > tol_deg)), float(np.sum(e)))
+        if best is None or score < best[2]:
+            best = (p8, eq, score)
+        if score[0] == 0 or not eq.converged:
+            break
+        unreachable = np.abs(span_err) > goal
+        if np.any(unreachable):
+            new_eval = np.where(unreachable, eq.joint_angles_deg, target)
+            if np.max(np.abs(new_eval - theta_eval)) < 0.1:
+                break
+            theta_eval = new_eval
+        else:
+            goal *= 0.5
+    p8, eq, _ = best
+    err = eq.joint_angles_deg - target
+    reasons = []
+    if not eq.converged:
+        reasons.append(f"forward model did not converge ({CASCADE_EQUILIBRIUM_STATUS[eq.status]})")
+    for j in np.flatnonzero(np.abs(err) > tol_deg):
+        groups = SPANS[JOINTS[j]]
+        at_bound = [
+            PRESSURE_NAMES[2 * GROUPS.index(g) + c]
+            for g in groups
+            for c in (0, 1)
+            if p8[2 * GROUPS.index(g) + c] >= p_max_kpa * (1 - 1e-6)
+        ]
+        reasons.append(
+            f"{JOINTS[j]} off target by {err[j]:+.1f} deg (tolerance {tol_deg:g} deg; "
+            f"needs {m_req[j]:.3g} N m over {'+'.join('LA_' + g for g in groups)})"
+            + (f", {', '.join(at_bound)} at the {p_max_kpa:g} kPa limit" if at_bound else "")
+        )
+    if limits is not None:
+        for j in np.flatnonzero(np.abs(eq.actuator_moments_nm) > limits):
+            reasons.append(
+                f"active safety limit exceeded at {JOINTS[j]} ({eq.actuator_moments_nm[j]:.3g} vs {limits[j]:.3g} N m)"
+            )
+    unit_target, _ = _span_angles_deg(model, p8, m_req)
+    return Plan(
+        exercise=exercise,
+        target_deg=target,
+        pressures_kpa=p8,
+        equilibrium=eq,
+        achieved=not reasons,
+        reason="; ".join(reasons),
+        required_moments_nm=m_req,
+        target_unit_angles_deg=unit_target,
+    )
+
+
+# --------------------------------------------------------------------------
+# Patient plans as a dataset, and the rule's file-level entry point
+# --------------------------------------------------------------------------
+def plan_patient(model: CascadeModel, targets: Mapping[str, Sequence[float]], **kw) -> list[Plan]:
+    """:func:`plan_exercise` for every exercise of ``targets`` ({name: (MCP, PIP, DIP) deg})."""
+    return [plan_exercise(model, t, exercise=name, **kw) for name, t in targets.items()]
+
+
+def plans_dataset(
+    model: CascadeModel,
+    plans: Sequence[Plan],
+    *,
+    tol_deg: float,
+    active_limits_nm: Sequence[float] | None,
+    notes: Mapping[str, str] | None = None,
+):
+    """The contract's ``cascade_plan.nc`` content (without provenance)."""
+    import xarray as xr
+
+    ex = [p.exercise for p in plans]
+    droop = solve_equilibrium(model, np.zeros(8))
+    flag_vals = np.array(sorted(CASCADE_EQUILIBRIUM_STATUS), dtype="i1")
+    lim = np.full(3, np.nan) if active_limits_nm is None else np.asarray(active_limits_nm, float)
+    eqs = [p.equilibrium for p in plans]
+    ds = xr.Dataset(
+        {
+            "pressure_kpa": (
+                ("exercise", "group", "chamber"),
+                np.array([pressures_table(p.pressures_kpa) for p in plans]),
+                {"units": "kPa", "long_name": "planned chamber pressure"},
+            ),
+            "target_angle_deg": (
+                ("exercise", "joint"),
+                np.array([p.target_deg for p in plans]),
+                {"units": "degree", "long_name": "target joint angle (Table 1)"},
+            ),
+            "predicted_angle_deg": (
+                ("exercise", "joint"),
+                np.array([e.joint_angles_deg for e in eqs]),
+                {"units": "degree", "long_name": "joint angle at equilibrium under the planned pressures"},
+            ),
+            "angle_error_deg": (
+                ("exercise", "joint"),
+                np.array([e.joint_angles_deg - p.target_deg for e, p in zip(eqs, plans)]),
+                {"units": "degree", "long_name": "predicted minus target joint angle"},
+            ),
+            "achieved": (
+                "exercise",
+                np.array([p.achieved for p in plans]),
+                {"long_name": f"every joint within {tol_deg:g} deg of its target, moments within the active limits"},
+            ),
+            "reason": (
+                "exercise",
+                np.array([p.reason for p in plans], dtype=object),
+                {"long_name": "why the exercise is not reached (empty if reached)"},
+            ),
+            "status": (
+                "exercise",
+                np.array([e.status for e in eqs], dtype="i1"),
+                {
+                    "long_name": "forward-solve status",
+                    "flag_values": flag_vals,
+                    "flag_meanings": " ".join(CASCADE_EQUILIBRIUM_STATUS[int(v)] for v in flag_vals),
+                },
+            ),
+            "actuator_moment_nm": (
+                ("exercise", "joint"),
+                np.array([e.actuator_moments_nm for e in eqs]),
+                {"units": "N m", "long_name": "flexion moment the actuator applies about the joint at equilibrium"},
+            ),
+            "required_moment_nm": (
+                ("exercise", "joint"),
+                np.array([p.required_moments_nm for p in plans]),
+                {
+                    "units": "N m",
+                    "long_name": "moment per unit of the joint's span that holds the target pose (Table 7-like)",
+                },
+            ),
+            "unit_target_angle_deg": (
+                ("exercise", "group"),
+                np.array([p.target_unit_angles_deg for p in plans]),
+                {
+                    "units": "degree",
+                    "long_name": "unit bending angle at the target pose under the planned pressures (Table 7-like)",
+                },
+            ),
+            "unit_angle_deg": (
+                ("exercise", "group"),
+                np.array([e.unit_angles_deg for e in eqs]),
+                {"units": "degree", "long_name": "unit bending angle at equilibrium"},
+            ),
+            "unit_moment_nm": (
+                ("exercise", "group"),
+                np.array([e.unit_moments_nm for e in eqs]),
+                {"units": "N m", "long_name": "bending moment each unit carries at equilibrium"},
+            ),
+            "strap_force_n": (
+                ("exercise", "strap"),
+                np.array([e.strap_forces_n for e in eqs]),
+                {"units": "N", "long_name": "strap force transmitting the span moment (positive: pulls into flexion)"},
+            ),
+            "sum_sq_pressure_kpa2": (
+                "exercise",
+                np.array([float(p.pressures_kpa @ p.pressures_kpa) for p in plans]),
+                {"units": "kPa2", "long_name": "objective: sum of squared pressures"},
+            ),
+            "active_limit_nm": ("joint", lim, {"units": "N m", "long_name": "active safety limit"}),
+            "droop_angle_deg": (
+                "joint",
+                droop.joint_angles_deg,
+                {"units": "degree", "long_name": "joint angle at zero pressure (gravity droop with the actuator on)"},
+            ),
+            "units_per_group": (
+                "group",
+                np.array([model.n_per_group[g] for g in GROUPS], dtype="i4"),
+                {"units": "1", "long_name": "actuator units per group"},
+            ),
+            "segment_mass_kg": ("segment", model.finger.masses_kg, {"units": "kg", "long_name": "phalanx mass"}),
+        },
+        coords={
+            "exercise": ex,
+            "group": list(GROUPS),
+            "chamber": list(CHAMBERS),
+            "joint": list(JOINTS),
+            "strap": ["PIP", "DIP"],
+            "segment": ["PP", "MP", "DP"],
+        },
+    )
+    ds.attrs.update(
+        {
+            "unit_mass_kg": model.unit_mass_kg,
+            "unit_length_mm": model.unit_length_m * 1e3,
+            "spans": "; ".join(f"{j}: {'+'.join(g)}" for j, g in SPANS.items()),
+            "finger_mass_source": model.finger.mass_source,
+            "droop_converged": int(droop.converged),
+            **dict(notes or {}),
+        }
+    )
+    return ds

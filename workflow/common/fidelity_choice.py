@@ -1,0 +1,181 @@
+"""The fidelity study's choices as the stages read them.
+
+An FE case's name and config (:class:`FemCase`), the cheapest method within a
+tolerance (:func:`cheapest_within`), and the two readers the rules use: the
+unit mesh the FE study chose (:func:`apply_fem_choice`) and the FEA check's
+mesh (:func:`check_choice`).  Pure functions on configs and small datasets.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+__all__ = [
+    "FemCase",
+    "fem_cases",
+    "case_actuator",
+    "Choice",
+    "cheapest_within",
+    "apply_fem_choice",
+    "check_choice",
+    "P_STUDY",
+]
+
+
+@dataclass(frozen=True)
+class FemCase:
+    """One FE unit fidelity: model (``2d``/``3d``), element size (mm), self-contact."""
+
+    model: str
+    h_mm: float
+    contact: bool
+
+    @property
+    def name(self) -> str:
+        return f"fem_{self.model}_h{self.h_mm:g}_{'contact' if self.contact else 'nocontact'}"
+
+    @classmethod
+    def parse(cls, name: str) -> "FemCase":
+        m = re.fullmatch(r"fem_(2d|3d)_h([0-9.]+)_(contact|nocontact)", name)
+        if m is None:
+            raise ValueError(f"not an FE case name: {name!r} (expected e.g. fem_2d_h1_contact)")
+        return cls(m.group(1), float(m.group(2)), m.group(3) == "contact")
+
+
+def fem_cases(spec: Sequence[Mapping]) -> list[FemCase]:
+    """Cases of the config list ``[{model, h_mm: [...], contact}, ...]``, each once, in order."""
+    out: list[FemCase] = []
+    for s in spec:
+        for h in s["h_mm"]:
+            c = FemCase(str(s["model"]), float(h), bool(s["contact"]))
+            if c not in out:
+                out.append(c)
+    return out
+
+
+def case_actuator(actuator: Mapping, case: FemCase) -> dict:
+    """The ``actuator`` config with the case's element size and contact switch."""
+    mesh = dict(actuator.get("mesh", {}), **{f"h_{case.model}_mm": float(case.h_mm)})
+    contact = dict(actuator.get("contact", {}), enabled=bool(case.contact))
+    return dict(actuator, mesh=mesh, contact=contact)
+
+
+@dataclass
+class Choice:
+    """The fidelity picked for one stage, and why."""
+
+    stage: str
+    method: str
+    reason: str
+    error: float
+    wall_time_s: float
+    met_tolerance: bool
+
+
+def cheapest_within(
+    stage: str,
+    methods: Sequence[str],
+    wall_time_s: Sequence[float],
+    error: Sequence[float],
+    tolerance: float,
+    *,
+    converged: Sequence[bool] | None = None,
+    unit: str = "",
+) -> Choice:
+    """The cheapest converged method whose error (its largest over the stage's quantities) is within ``tolerance``.
+
+    If none is, the most accurate converged one, said so.  ``error`` NaN
+    counts as unknown: such a method is only taken when it is the reference
+    (error 0 is expected there) -- callers pass 0 for the reference.
+    """
+    t = np.asarray(wall_time_s, float)
+    e = np.asarray(error, float)
+    ok = np.ones(t.size, bool) if converged is None else np.asarray(converged, bool)
+    within = ok & np.isfinite(e) & (e <= tolerance)
+    u = f" {unit}" if unit and unit != "1" else ""
+    fmt = (lambda x: f"{x:.3g}{u}") if u else (lambda x: f"{100 * x:.2f} %")
+    if within.any():
+        i = int(np.flatnonzero(within)[np.argmin(t[within])])
+        faster = ok & (t < t[i])
+        why = f"{methods[i]}: the cheapest ({t[i]:.3g} s) within {fmt(tolerance)} (its error {fmt(e[i])})" + (
+            f"; faster but outside: {', '.join(f'{methods[k]} {fmt(e[k])}' for k in np.flatnonzero(faster))}"
+            if faster.any()
+            else ""
+        )
+        return Choice(stage, methods[i], why, float(e[i]), float(t[i]), True)
+    cand = ok & np.isfinite(e)
+    if not cand.any():
+        raise ValueError(f"{stage}: no converged method with a known error to choose from")
+    i = int(np.flatnonzero(cand)[np.argmin(e[cand])])
+    return Choice(
+        stage,
+        methods[i],
+        f"{methods[i]}: no method within {fmt(tolerance)}; the most accurate "
+        f"converged one taken (error {fmt(e[i])}, {t[i]:.3g} s)",
+        float(e[i]),
+        float(t[i]),
+        False,
+    )
+
+
+def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -> tuple[dict, dict]:
+    """(``actuator`` config with the chosen mesh and contact for ``model``, the fidelity attrs to record).
+
+    ``choice``: the FE study's choice (``results/fidelity/fem.nc``); without it
+    (``fidelity.auto`` off) the config's own mesh is used and said so.
+    """
+    act = dict(actuator)
+    if choice is None:
+        h_cfg = dict(act.get("mesh", {})).get(f"h_{model}_mm")
+        return act, {
+            "fidelity": "config",
+            "fidelity_reason": f"actuator.mesh.h_{model}_mm = {h_cfg} (fidelity.auto off)",
+        }
+    if model not in [str(m) for m in choice["model_choice"].values]:
+        h_cfg = dict(act.get("mesh", {})).get(f"h_{model}_mm")
+        return act, {
+            "fidelity": "config",
+            "fidelity_reason": f"actuator.mesh.h_{model}_mm = {h_cfg} (no {model} case in fidelity.fem_cases)",
+        }
+    row = choice.sel(model_choice=model)
+    case = FemCase(model, float(row["chosen_h_mm"]), bool(row["chosen_contact"]))
+    return case_actuator(act, case), {"fidelity": case.name, "fidelity_reason": str(row["choice_reason"].values)}
+
+
+def check_choice(
+    study: xr.Dataset | None, tolerance_deg: float, h_config_mm: float, penetration_bound_mm: float = np.inf
+) -> tuple[float, str]:
+    """(element size, why) for the FEA check: the cheapest mesh whose joint angles (every exercise of the
+    study) are within ``tolerance_deg`` of the finest converged one's (the config's without a study),
+    among the meshes whose contact penetration stays within ``penetration_bound_mm``.
+
+    ``study``: the dataset of :func:`workflow.fidelity.entry.write_check_study`.
+    """
+    if study is None:
+        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g} (fidelity.auto off)"
+    c = study
+    hs = c["h_mm"].values
+    ang = c["angle_deg"].values  # (h, exercise, joint)
+    ok = np.all(c["status"].values == 0, axis=1)
+    if "max_penetration_mm" in c:  # a mesh whose contact penetrates beyond the bound is not a valid check
+        ok &= ~np.any(c["max_penetration_mm"].values > penetration_bound_mm, axis=1)
+    wall = np.nanmean(c["wall_time_s"].values, axis=1)
+    ex = ", ".join(str(e) for e in c["exercise"].values)
+    if not ok.any():
+        return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g}: no mesh of the check study qualified"
+    r = int(np.flatnonzero(ok)[np.argmin(hs[ok])])
+    err = np.where(ok, np.max(np.abs(ang - ang[r]), axis=(1, 2)), np.nan)
+    ch = cheapest_within("fea_check", [f"check_h{h:g}" for h in hs], wall, err, tolerance_deg, converged=ok, unit="deg")
+    pen = "" if not np.isfinite(penetration_bound_mm) else f", penetration <= {penetration_bound_mm:g} mm"
+    return float(
+        hs[[f"check_h{h:g}" for h in hs].index(ch.method)]
+    ), f"{ch.reason} (study: {ex}, finest h = {hs[r]:g} mm{pen})"
+
+
+#: The study points: P_T in kPa at P_B = 0.
+P_STUDY = (60.0, 180.0, 300.0)

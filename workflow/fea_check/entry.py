@@ -1,0 +1,223 @@
+"""Rule entry points of the FEA check (``fea_check``, ``standalone_actuator``):
+read the plan and the patient's inputs, build the FE model, run the check, write
+the dataset, the deformed meshes (.vtu) and the poses plot.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+from workflow.actuator.pressure_limit import material_limit
+from workflow.actuator.surrogates import load_surrogate
+from workflow.actuator.unit_model import load_unit_model
+from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
+from workflow.common.constants import CHAMBERS, GROUPS, JOINTS
+from workflow.common.provenance import open_result, write_dataset
+from workflow.common.vtu import write_vtu
+from workflow.fea_check.check import applied_limit, pressures_2d
+from workflow.fea_check.model import build_patient_fea
+from workflow.fea_check.plots import plot_fea_poses, plot_standalone
+from workflow.fea_check.run import run_fea_check
+from workflow.fea_check.standalone import MODELS, standalone_dataset
+
+__all__ = ["load_surrogate_angles", "write_fea_check", "write_standalone"]
+
+log = logging.getLogger(__name__)
+
+
+def load_surrogate_angles(surrogate_2d: str | None, surrogate_3d: str | None):
+    """(angle_3d, angle_2d, p_max_2d, p_max_3d) from the fitted surrogates, or Nones when not given."""
+    if not surrogate_2d or not surrogate_3d:
+        return None, None, np.inf, np.inf
+
+    s2, s3 = load_surrogate(surrogate_2d), load_surrogate(surrogate_3d)
+    return s3.angle_deg, s2.angle_deg, float(s2.p_max_kpa), float(s3.p_max_kpa)
+
+
+def write_fea_check(
+    patient_name: str,
+    patient: Mapping[str, Any],
+    *,
+    plan_nc: str,
+    joint_loads_nc: str,
+    moments_nc: str,
+    ccd_nc: str,
+    out_nc: str,
+    out_vtu: Sequence[str],
+    out_png: str | None,
+    fea_cfg: Mapping,
+    actuator_cfg: Mapping,
+    cascade_cfg: Mapping,
+    anthropometry: Mapping,
+    config_slice: Any,
+    surrogate_2d: str | None = None,
+    surrogate_3d: str | None = None,
+    unit_model_cfg: Mapping | None = None,
+    rule: str = "fea_check",
+    notes: Mapping[str, Any] | None = None,
+):
+    """The rule's entry point: build the patient's FE model, check the plan, write .nc, .vtu per exercise, plot.
+
+    With the surrogates and ``unit_model_cfg`` (config ``surrogates.unit_model``)
+    the reduced-order chains are built too: the 2D-unit prediction and the
+    correction step (config ``fea_check.correction``).
+    """
+
+    plan = open_result(plan_nc)
+    loads = open_result(joint_loads_nc)
+    finger, spring_note = patient_finger(
+        patient,
+        loads,
+        open_result(moments_nc),
+        open_result(ccd_nc),
+        cascade_cfg=cascade_cfg,
+        anthropometry=anthropometry,
+    )
+    upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
+    fea = build_patient_fea(
+        finger,
+        upg,
+        actuator_cfg=actuator_cfg,
+        cascade_cfg=cascade_cfg,
+        reference_dims_mm={k: float(v["mean"]) for k, v in anthropometry["measures"].items()},
+        fea_cfg=fea_cfg,
+    )
+    log.info("patient %s: %s; units %s; springs: %s", patient_name, fea.notes, upg, spring_note)
+    use_map = bool(fea_cfg.get("map_pressures", True)) and cascade_cfg.get("surrogate", "3d") == "3d"
+    a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
+    if use_map and a3 is None:
+        log.warning("no surrogates given: the plan's 3D pressures are applied to the 2D model unchanged")
+    ro_plan = ro_2d = None
+    if unit_model_cfg is not None and surrogate_2d and surrogate_3d:
+        units = {"2d": surrogate_2d, "3d": surrogate_3d}
+        ro_2d = patient_cascade(finger, load_unit_model(surrogate_2d, **unit_model_cfg), cascade_cfg, upg)
+        ro_plan = patient_cascade(
+            finger, load_unit_model(units[cascade_cfg.get("surrogate", "3d")], **unit_model_cfg), cascade_cfg, upg
+        )
+    material = material_limit(actuator_cfg.get("material"))
+    limit_plan = plan_limit(cascade_cfg, None if ro_plan is None else ro_plan.unit, material)
+    limit_2d = applied_limit(actuator_cfg, pm2)
+    log.info("patient %s: re-planned pressures <= %s; applied pressures <= %s", patient_name, limit_plan, limit_2d)
+    plan_opts = plan_options(
+        cascade_cfg,
+        plan["active_limit_nm"].sel(joint=list(JOINTS)).values if "active_limit_nm" in plan else None,
+        limit_plan,
+    )
+    solver = dict(actuator_cfg.get("solver", {}))
+    solver.update(dict(fea_cfg.get("solver", {})))
+    ds, checks, grav, corrections = run_fea_check(
+        fea,
+        plan,
+        exercises=fea_cfg.get("exercises") or None,
+        solver=solver,
+        tolerance_deg=float(cascade_cfg["tolerance_deg"]),
+        angle_3d=a3,
+        angle_2d=a2,
+        p_max_2d_kpa=pm2,
+        p_max_3d_kpa=pm3,
+        ro_plan=ro_plan,
+        ro_2d=ro_2d,
+        correction=fea_cfg.get("correction"),
+        plan_opts=plan_opts,
+        limit_2d=limit_2d,
+        notes={
+            "patient": patient_name,
+            "springs": spring_note,
+            "p_limit_kpa": limit_2d.kpa,
+            "p_limit_source": limit_2d.source,
+            "p_limit_plan_kpa": limit_plan.kpa,
+            "p_limit_plan_source": limit_plan.source,
+            "pressures": "2D-to-3D mapped" if a3 is not None else "plan's, unchanged",
+            "h_actuator_mm": float(fea_cfg.get("h_actuator_mm", 2.0)),
+            **dict(notes or {}),
+        },
+    )
+    write_dataset(
+        ds,
+        out_nc,
+        rule=rule,
+        config_slice=config_slice,
+        title=f"2D FEA check of the cascade plan of patient {patient_name}",
+    )
+    by_name = {c.exercise: c for c in checks}
+    for path in out_vtu:
+        name = Path(path).stem.split("_")[-1]
+        c = by_name.get(name)
+        cm = fea.setup.cm
+        write_vtu(
+            cm.mesh,
+            c.result.u if c is not None else grav.u,
+            path,
+            deform=True,
+            cell_data={"material": cm.material, "body": cm.body},
+        )
+    if out_png:
+        cm = fea.setup.cm
+        corrected = [c.checks[c.best].result.u if c.best else None for c in corrections] if corrections else None
+        plot_fea_poses(
+            cm.mesh.p,
+            cm.mesh.t,
+            cm.material,
+            [c.result.u for c in checks],
+            ds,
+            finger,
+            out_png,
+            title=f"patient {patient_name}",
+            corrected_states=corrected,
+        )
+    return ds
+
+
+def write_standalone(
+    patient_name: str,
+    *,
+    plan_nc: str,
+    out_nc: str,
+    out_png: str | None,
+    fea_cfg: Mapping,
+    actuator_cfg: Mapping,
+    cascade_cfg: Mapping,
+    config_slice: Any,
+    surrogate_2d: str | None = None,
+    surrogate_3d: str | None = None,
+    rule: str = "standalone_actuator",
+) -> xr.Dataset:
+    """The rule's entry point (see the module docstring)."""
+
+    plan = open_result(plan_nc)
+    sa = dict(fea_cfg.get("standalone", {}))
+    ex = list(sa.get("exercises") or fea_cfg.get("exercises") or [str(e) for e in plan["exercise"].values])
+    models = list(sa.get("models", MODELS))
+    use_map = bool(fea_cfg.get("map_pressures", True)) and cascade_cfg.get("surrogate", "3d") == "3d"
+    a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
+    p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
+    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
+    solver = dict(actuator_cfg.get("solver", {}))
+    solver.update(dict(fea_cfg.get("solver", {})))
+    ds = standalone_dataset(
+        plan,
+        exercises=ex,
+        models=models,
+        actuator_cfg=actuator_cfg,
+        h_2d_mm=float(fea_cfg.get("h_actuator_mm", 2.0)),
+        h_3d_mm=sa.get("h_3d_mm", [4.0, 3.0]),
+        solver=solver,
+        p2=p2,
+        flag=flag,
+    )
+    ds.attrs["patient"] = patient_name
+    write_dataset(
+        ds,
+        out_nc,
+        rule=rule,
+        config_slice=config_slice,
+        title=f"Stand-alone whole actuators at the plan's pressures, patient {patient_name}",
+    )
+    if out_png:
+        plot_standalone(ds, out_png, title=f"patient {patient_name}")
+    return ds
