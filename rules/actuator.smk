@@ -45,7 +45,7 @@ rule unit_moment_check:
     params:
         actuator=config["actuator"],
         unit_model=config["surrogates"]["unit_model"],
-        config_slice={"actuator": config["actuator"], "surrogates": {"unit_model": config["surrogates"]["unit_model"]}},
+        config_slice=cfg("actuator") | {"surrogates": {"unit_model": config["surrogates"]["unit_model"]}},
     script:
         "../workflow/scripts/unit_moment_check.py"
 
@@ -165,6 +165,6 @@ rule mapping_2d3d:
         "../envs/project.yaml"
     params:
         pressure_limit=get_pressure_limit(),
-        config_slice=cfg("sweep", "surrogates") | {"pressure_limit": get_pressure_limit()},
+        config_slice=get_mapping_slice(),
     script:
         "../workflow/scripts/mapping_2d3d.py"

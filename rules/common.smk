@@ -162,6 +162,30 @@ def get_cascade_slice(wildcards):
     }
 
 
+def get_mapping_slice():
+    """The config the 2D-to-3D mapping depends on: the sweeps, the surrogates and the pressure limit."""
+    return cfg("sweep", "surrogates") | {"pressure_limit": get_pressure_limit()}
+
+
+def get_actuator_part(*keys):
+    """Only these sections of the actuator config (a rule that uses no more does not rerun on the rest)."""
+    return {k: v for k, v in config["actuator"].items() if k in keys}
+
+
+def get_validation_patient():
+    """The config entry of the patient compared with the paper (cascade.validation_patient)."""
+    return config["patients"][config["cascade"]["validation_patient"]]
+
+
+def get_patient_loads_slice(wildcards):
+    """Param function: one patient's loads depend on its slice and, with fidelity.auto, the study's tolerance."""
+    fid = config["fidelity"]
+    extra = (
+        {"fidelity": {"tolerance": fid["tolerance"]["msk_rel"], "scaling": config["scaling"]}} if fid["auto"] else {}
+    )
+    return patient_cfg(wildcards) | extra
+
+
 def get_validation_plans(wildcards):
     """Input function: the plan compared with Table 8 (the mean finger) and, if configured, the dummy's (Table 10)."""
     c = config["cascade"]
@@ -186,6 +210,31 @@ def get_fea_surrogates(wildcards):
 def get_fea_check_slice(wildcards):
     """Param function: the config one patient's FEA check depends on."""
     return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": config["fea_check"]}
+
+
+def get_fea_check_rule_slice(wildcards):
+    """Param function: the check's slice and the tolerance that judges it."""
+    return get_fea_check_slice(wildcards) | {"check_tolerance_deg": config["fidelity"]["tolerance"]["check_deg"]}
+
+
+def get_check_study_slice(wildcards):
+    """Param function: the check's slice and the mesh study's settings (fidelity.check)."""
+    return {**get_fea_check_slice(wildcards), "check": config["fidelity"]["check"]}
+
+
+def get_fem_case_slice(wildcards):
+    """Param function: one FE case of the fidelity study depends on the unit config and the study points."""
+    return {"case": wildcards.case, "actuator": config["actuator"], "p_top_kpa": config["fidelity"]["p_top_kpa"]}
+
+
+def get_fem_tolerances():
+    """The FE study's relative tolerances of the free angle and the blocked moment."""
+    return {q: config["fidelity"]["tolerance"][f"fem_{q}_rel"] for q in ("angle", "moment")}
+
+
+def get_fem_choice_slice():
+    """The config the FE study's choice depends on."""
+    return {"fidelity": {k: config["fidelity"][k] for k in ("fem_cases", "p_top_kpa", "tolerance")}}
 
 
 # --- Stage fidelity -----------------------------------
@@ -245,3 +294,20 @@ def get_fidelity_choice_inputs(wildcards):
     if Path(config["cascade"]["section_points"]).is_file():
         out["fea_check"] = f"results/patients/{config['cascade']['validation_patient']}/fea_check.nc"
     return out
+
+
+# --- Stage reporting --------------------------------------------------
+#: The datasets the report shows as tables, by table name.
+REPORT_DATASETS = {
+    "scaling": "results/validation/scaling.nc",
+    "musculoskeletal": "results/validation/musculoskeletal.nc",
+    "unit_check": "results/actuator/unit_check.nc",
+    "surrogate_cv": "results/actuator/surrogate_cv.nc",
+    "mapping": "results/actuator/mapping_2d3d.nc",
+    "cascade_validation": "results/validation/cascade.nc",
+}
+
+
+def get_report_dataset(wildcards):
+    """Input function: the dataset behind one report table."""
+    return REPORT_DATASETS[wildcards.table]

@@ -39,8 +39,7 @@ rule fea_check:
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         tolerance_deg=config["fidelity"]["tolerance"]["check_deg"],
-        config_slice=lambda wc: get_fea_check_slice(wc)
-        | {"check_tolerance_deg": config["fidelity"]["tolerance"]["check_deg"]},
+        config_slice=get_fea_check_rule_slice,
     script:
         "../workflow/scripts/fea_check.py"
 

@@ -27,11 +27,7 @@ rule fidelity_fem:
     params:
         actuator=config["actuator"],
         p_top_kpa=config["fidelity"]["p_top_kpa"],
-        config_slice=lambda wc: {
-            "case": wc.case,
-            "actuator": config["actuator"],
-            "p_top_kpa": config["fidelity"]["p_top_kpa"],
-        },
+        config_slice=get_fem_case_slice,
     script:
         "../workflow/scripts/fidelity_fem.py"
 
@@ -49,8 +45,8 @@ rule fidelity_fem_choice:
     conda:
         "../envs/project.yaml"
     params:
-        tolerance={q: config["fidelity"]["tolerance"][f"fem_{q}_rel"] for q in ("angle", "moment")},
-        config_slice={"fidelity": {k: config["fidelity"][k] for k in ("fem_cases", "p_top_kpa", "tolerance")}},
+        tolerance=get_fem_tolerances(),
+        config_slice=get_fem_choice_slice(),
     script:
         "../workflow/scripts/fidelity_fem_choice.py"
 
@@ -105,7 +101,7 @@ rule fidelity_check:
         cascade=config["cascade"],
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
-        config_slice=lambda wc: {**get_fea_check_slice(wc), "check": config["fidelity"]["check"]},
+        config_slice=get_check_study_slice,
     script:
         "../workflow/scripts/fidelity_check.py"
 
@@ -134,7 +130,7 @@ rule speed_accuracy:
         "../envs/project.yaml"
     params:
         surrogates=config["surrogates"],
-        patient=lambda wc: config["patients"][config["cascade"]["validation_patient"]],
+        patient=get_validation_patient(),
         cascade=config["cascade"],
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],

@@ -88,12 +88,7 @@ rule patient_loads:
         prediction_alpha=config["rsm"]["prediction_alpha"],
         tolerance=config["fidelity"]["tolerance"]["msk_rel"],
         scaling=config["scaling"],
-        config_slice=lambda wc: patient_cfg(wc)
-        | (
-            {"fidelity": {"tolerance": config["fidelity"]["tolerance"]["msk_rel"], "scaling": config["scaling"]}}
-            if config["fidelity"]["auto"]
-            else {}
-        ),
+        config_slice=get_patient_loads_slice,
     script:
         "../workflow/scripts/patient_loads.py"
 

@@ -26,14 +26,7 @@ rule moment_angle_plot:
 
 rule report_table:
     input:
-        dataset=lambda wc: {
-            "scaling": "results/validation/scaling.nc",
-            "musculoskeletal": "results/validation/musculoskeletal.nc",
-            "unit_check": "results/actuator/unit_check.nc",
-            "surrogate_cv": "results/actuator/surrogate_cv.nc",
-            "mapping": "results/actuator/mapping_2d3d.nc",
-            "cascade_validation": "results/validation/cascade.nc",
-        }[wc.table],
+        dataset=get_report_dataset,
         code=code_files("scripts.report_table"),
     output:
         report("results/report/{table}.html", caption="../report/tables.rst", category="Tables"),
@@ -42,7 +35,7 @@ rule report_table:
     benchmark:
         "results/benchmarks/rules/report_table_{table}.tsv"
     wildcard_constraints:
-        table="scaling|musculoskeletal|unit_check|surrogate_cv|mapping|cascade_validation",
+        table="|".join(REPORT_DATASETS),
     conda:
         "../envs/project.yaml"
     script:

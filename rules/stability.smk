@@ -19,16 +19,10 @@ rule stability_rays:
     params:
         rays=config["stability"]["rays"],
         # only the parts of the unit model the rays use (not its sweep or check settings)
-        actuator={
-            k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "mesh", "contact", "solver")
-        },
+        actuator=get_actuator_part("geometry", "material", "mesh", "contact", "solver"),
         config_slice={
             "stability": {"rays": config["stability"]["rays"]},
-            "actuator": {
-                k: v
-                for k, v in config["actuator"].items()
-                if k in ("geometry", "material", "mesh", "contact", "solver")
-            },
+            "actuator": get_actuator_part("geometry", "material", "mesh", "contact", "solver"),
         },
     script:
         "../workflow/scripts/stability_rays.py"
@@ -47,10 +41,10 @@ rule stability_locking:
         "../envs/project.yaml"
     params:
         locking=config["stability"]["locking"],
-        actuator={k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")},
+        actuator=get_actuator_part("geometry", "material", "solver"),
         config_slice={
             "stability": {"locking": config["stability"]["locking"]},
-            "actuator": {k: v for k, v in config["actuator"].items() if k in ("geometry", "material", "solver")},
+            "actuator": get_actuator_part("geometry", "material", "solver"),
         },
     script:
         "../workflow/scripts/stability_locking.py"
@@ -105,12 +99,12 @@ rule stability_maps:
     params:
         patients=PATIENTS,
         # the sweeps' and unit check's element sizes and contact switch (labels of the maps)
-        actuator={"mesh": config["actuator"]["mesh"], "contact": config["actuator"]["contact"]},
+        actuator=get_actuator_part("mesh", "contact"),
         stability=config["stability"],
         cascade_surrogate=config["cascade"]["surrogate"],
         config_slice={
             "stability": config["stability"],
-            "actuator": {"mesh": config["actuator"]["mesh"], "contact": config["actuator"]["contact"]},
+            "actuator": get_actuator_part("mesh", "contact"),
             "cascade": {"surrogate": config["cascade"]["surrogate"]},
             "patients": PATIENTS,
         },

@@ -16,7 +16,8 @@ from _doubles import double_response  # noqa: E402
 
 from workflow.actuator import sampled_region
 from workflow.doe.ccd import ccd_dataset, ccd_design
-from workflow.stability import design
+from workflow.stability import design as DR
+from workflow.stability import entry_fem
 from workflow.stability import rays as S
 from workflow.stability import samples as SM
 
@@ -194,10 +195,10 @@ def test_coverage_grid_of_a_full_symmetric_sweep_covers_the_square():
 def test_prediction_variance_sums_to_the_model_terms_at_the_design_and_grows_outside():
     design = ccd_dataset(ccd_design())
     X = np.column_stack([design[d].values for d in ("depth", "length", "breadth")])
-    spv = design.scaled_prediction_variance(X, X)
+    spv = DR.scaled_prediction_variance(X, X)
     assert spv.sum() / X.shape[0] == pytest.approx(10.0)  # trace of the hat matrix = number of terms
     u = np.ones(3) / np.sqrt(3)
-    r = design.scaled_prediction_variance(X, np.outer([1.0, 1.5, 2.0], u))
+    r = DR.scaled_prediction_variance(X, np.outer([1.0, 1.5, 2.0], u))
     assert r[0] < r[1] < r[2] and r[2] > 5 * r[0]
 
 
@@ -208,7 +209,7 @@ def test_design_range_and_feasibility_tables():
             coords={"dimension": ["depth", "length", "breadth"]},
         )
 
-    t = design.design_range_table({"a": loads([0, 0, 0], True), "b": loads([1.2, 0, 0.5], False)})
+    t = DR.design_range_table({"a": loads([0, 0, 0], True), "b": loads([1.2, 0, 0.5], False)})
     assert t["coded_norm"].values == pytest.approx([0.0, 1.3])
     assert t["in_design_range"].values.tolist() == [True, False]
 
@@ -221,7 +222,7 @@ def test_design_range_and_feasibility_tables():
             coords={"exercise": ["TGE1", "TGE2"]},
         )
 
-    f = design.feasibility_table({"a": plan([True, False]), "b": plan([False, False])})
+    f = DR.feasibility_table({"a": plan([True, False]), "b": plan([False, False])})
     assert f["achieved"].values.tolist() == [[True, False], [False, False]]
     assert str(f["reason"].sel(patient="b", exercise="TGE1").values) == "PIP off target"
 
@@ -247,13 +248,13 @@ def test_write_stability_end_to_end(tmp_path):
         "n_pressures": 3,
         "variants": [{"h_mm": 2.0, "contact": True, "formulation": "mixed", "ratios": [0.0, 0.5]}],
     }
-    R.write_rays(tmp_path / "rays.nc", rays_cfg=rays_cfg, actuator={}, config_slice={}, solve=solve)
+    entry_fem.write_rays(tmp_path / "rays.nc", rays_cfg=rays_cfg, actuator={}, config_slice={}, solve=solve)
 
     def lock_solve(k, formulation):
         angle = 5.0 / (1 + k / 50) if formulation == "displacement" else 5.0
         return SimpleNamespace(status=0, bending_angle_deg=angle, wall_time_s=0.01)
 
-    R.write_locking(
+    entry_fem.write_locking(
         tmp_path / "locking.nc",
         locking_cfg={"h_mm": 2.0, "p_top_kpa": 60.0, "contact": False, "bulk_ratios": [10, 1e4]},
         actuator={},

@@ -12,7 +12,7 @@ from _doubles import double_angle as free  # noqa: E402
 from _doubles import double_moment as blocked
 from _doubles import double_response
 
-from workflow.actuator import unit_model
+from workflow.actuator import unit_inverse, unit_model
 from workflow.actuator.unit_model import UnitModel
 
 
@@ -88,7 +88,7 @@ def test_fit_shape_recovers_c_and_verify(model):
 
 
 def test_pressures_on_ray(model):
-    res = unit_model.pressures_on_ray(model, [5.0, -4.0, 50.0], [0.005, 0.0, 0.0], [0.2, np.inf, 0.0])
+    res = unit_inverse.pressures_on_ray(model, [5.0, -4.0, 50.0], [0.005, 0.0, 0.0], [0.2, np.inf, 0.0])
     assert list(res["status"]) == [0, 0, 1]
     pt, pb = res["p_top_kpa"], res["p_bottom_kpa"]
     assert pb[0] / pt[0] == pytest.approx(0.2)
@@ -99,7 +99,7 @@ def test_pressures_on_ray(model):
 
 def test_min_norm_against_brute_force(model):
     target, m = 4.0, 0.003
-    res = unit_model.min_norm_pressures(model, target, m)
+    res = unit_inverse.min_norm_pressures(model, target, m)
     assert res["status"] == 0
     pt, pb = float(res["p_top_kpa"]), float(res["p_bottom_kpa"])
     assert model.angle_deg(pt, pb, m) == pytest.approx(target, abs=1e-3)
@@ -110,7 +110,7 @@ def test_min_norm_against_brute_force(model):
     brute = np.hypot(PT, PB)[near].min()
     assert np.hypot(pt, pb) <= brute + 0.5
     # unreachable target
-    assert unit_model.min_norm_pressures(model, 40.0, 0.0)["status"] == 1
+    assert unit_inverse.min_norm_pressures(model, 40.0, 0.0)["status"] == 1
 
 
 def test_on_a_fitted_surrogate():

@@ -118,13 +118,7 @@ def read_planned_pressures(path: str | Path) -> pd.DataFrame:
 
 
 def mapping_dataset(
-    planned: pd.DataFrame,
-    angle_3d: ArrayFn,
-    angle_2d: ArrayFn,
-    *,
-    p_max_2d_kpa: float,
-    p_max_3d_kpa: float,
-    **kwargs,
+    planned: pd.DataFrame, angle_3d: ArrayFn, angle_2d: ArrayFn, *, p_max_2d_kpa: float, p_max_3d_kpa: float, **kwargs
 ) -> xr.Dataset:
     """Map every (exercise, group) pair of a Table 8 frame -> ``mapping_2d3d.nc`` content."""
     ex = list(planned.index)

@@ -37,25 +37,16 @@ import joblib
 import numpy as np
 import sklearn
 import xarray as xr
-from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator, RBFInterpolator
-from sklearn.base import BaseEstimator, RegressorMixin
-from sklearn.gaussian_process import GaussianProcessRegressor
-from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from sklearn.model_selection import KFold
-from sklearn.neighbors import KNeighborsRegressor
-from sklearn.pipeline import Pipeline, make_pipeline
-from sklearn.preprocessing import StandardScaler
+from sklearn.pipeline import Pipeline
 
+from workflow.actuator.regressors import REGRESSORS, make_regressor
 from workflow.common.fidelity_choice import cheapest_within
 from workflow.common.provenance import corrupt_input, load_joblib
 
 __all__ = [
-    "REGRESSORS",
     "TARGETS",
     "SELECTION_RULE",
-    "RBFRegressor",
-    "LinearInterpRegressor",
-    "make_regressor",
     "training_data",
     "cross_validate",
     "surrogate_cv",
@@ -70,82 +61,12 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-REGRESSORS = ("knn", "knn_distance", "rbf", "linear", "gp")
 #: target name -> (response variable, units)
 TARGETS = {"angle": ("bending_angle_deg", "degree"), "moment": ("bending_moment_nm", "N m")}
 SELECTION_RULE = (
     "smallest mean over folds and targets (angle, moment) of RMSE / standard deviation of the target; "
     "chosen per FE model"
 )
-
-
-class RBFRegressor(RegressorMixin, BaseEstimator):
-    """scipy RBFInterpolator as a scikit-learn regressor (thin-plate spline by default)."""
-
-    def __init__(self, kernel: str = "thin_plate_spline", smoothing: float = 0.0):
-        self.kernel = kernel
-        self.smoothing = smoothing
-
-    def fit(self, X, y):
-        self.interp_ = RBFInterpolator(
-            np.asarray(X, float), np.asarray(y, float), kernel=self.kernel, smoothing=self.smoothing
-        )
-        return self
-
-    def predict(self, X):
-        return self.interp_(np.asarray(X, float))
-
-
-class LinearInterpRegressor(RegressorMixin, BaseEstimator):
-    """Piecewise-linear interpolation on the Delaunay triangulation; nearest sample outside the hull."""
-
-    def fit(self, X, y):
-        self.X_ = np.asarray(X, float)
-        self.y_ = np.asarray(y, float)
-        self._build()
-        return self
-
-    def _build(self):
-        self._lin = LinearNDInterpolator(self.X_, self.y_)
-        self._near = NearestNDInterpolator(self.X_, self.y_)
-
-    def predict(self, X):
-        X = np.asarray(X, float)
-        out = self._lin(X)
-        bad = np.isnan(out)
-        if bad.any():
-            out[bad] = self._near(X[bad])
-        return out
-
-    # The qhull objects are rebuilt after unpickling rather than stored.
-    def __getstate__(self):
-        state = self.__dict__.copy()
-        state.pop("_lin", None)
-        state.pop("_near", None)
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
-        if "X_" in state:
-            self._build()
-
-
-def make_regressor(name: str, *, k: int = 4, random_state: int = 0) -> Pipeline:
-    """A fresh, unfitted Pipeline (StandardScaler, model) for regressor ``name``."""
-    if name == "knn":
-        model = KNeighborsRegressor(n_neighbors=k, weights="uniform")
-    elif name == "knn_distance":
-        model = KNeighborsRegressor(n_neighbors=k, weights="distance")
-    elif name == "rbf":
-        model = RBFRegressor()
-    elif name == "linear":
-        model = LinearInterpRegressor()
-    elif name == "gp":
-        kernel = ConstantKernel(1.0, (1e-3, 1e3)) * RBF([1.0, 1.0], (1e-2, 1e2)) + WhiteKernel(1e-4, (1e-10, 1e-1))
-        model = GaussianProcessRegressor(kernel=kernel, normalize_y=True, random_state=random_state)
-    else:
-        raise ValueError(f"unknown regressor {name!r}; known: {REGRESSORS}")
-    return make_pipeline(StandardScaler(), model)
 
 
 def training_data(response: xr.Dataset) -> tuple[np.ndarray, dict[str, np.ndarray]]:

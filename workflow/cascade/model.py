@@ -50,6 +50,8 @@ and ``blocked_moment_nm(p_top, p_bottom)`` (per unit; positive = flexion).
 
 Units: SI inside (m, N, rad); pressures kPa, angles deg, moments N m, forces N
 at the interfaces.
+
+Over 400 lines: the cascade's forward model and its equilibrium solve (with its fallbacks) are one idea.
 """
 
 from __future__ import annotations
@@ -60,8 +62,8 @@ from typing import Any, Mapping, Protocol, Sequence
 import numpy as np
 from scipy.optimize import root
 
-from workflow.cascade.finger import JOINTS, Finger, gravity_moments_nm
-from workflow.common.constants import GROUPS, PRESSURE_NAMES
+from workflow.cascade.finger import Finger, gravity_moments_nm
+from workflow.common.constants import GROUPS, JOINTS, PRESSURE_NAMES
 
 __all__ = [
     "SPANS",

@@ -12,9 +12,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from workflow.cascade.finger import JOINTS  # noqa: E402
-from workflow.cascade.model import GROUPS, CascadeModel  # noqa: E402
+from workflow.cascade.model import CascadeModel
 from workflow.cascade.planning import Plan
+from workflow.common.constants import GROUPS, JOINTS
 
 __all__ = ["plot_poses", "plot_validation"]
 

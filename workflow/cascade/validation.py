@@ -19,7 +19,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from workflow.cascade.model import GROUPS, PRESSURE_NAMES, SPANS
+from workflow.cascade.model import SPANS
+from workflow.common.constants import GROUPS, PRESSURE_NAMES
 
 __all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "compare_unit_moments"]
 

@@ -237,13 +237,7 @@ def _encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
 
 
 def write_dataset(
-    ds: xr.Dataset,
-    path: str | os.PathLike,
-    *,
-    rule: str,
-    config_slice: Any,
-    title: str,
-    source: str = "",
+    ds: xr.Dataset, path: str | os.PathLike, *, rule: str, config_slice: Any, title: str, source: str = ""
 ) -> Path:
     """Attach provenance and write ``ds`` to ``path`` as netCDF4 atomically.
 

@@ -122,9 +122,7 @@ def measure_dimension(code: str) -> str:
 
 
 def coded_levels(
-    measurements_mm: Mapping[str, float],
-    anthropometry: Mapping[str, Mapping[str, float]],
-    coded_unit_sd: float = 1.0,
+    measurements_mm: Mapping[str, float], anthropometry: Mapping[str, Mapping[str, float]], coded_unit_sd: float = 1.0
 ) -> dict[str, float]:
     """Coded levels from finger measurements.
 
@@ -151,10 +149,7 @@ def coded_levels(
 def design_region_flags(x: Mapping[str, float]) -> dict[str, bool]:
     """Whether coded levels lie in the CCD's sphere (||x|| <= 1 and each |x_i| <= 1)."""
     v = np.array([x[f] for f in FACTORS], float)
-    return {
-        "in_sphere": bool(np.linalg.norm(v) <= 1 + 1e-9),
-        "in_box": bool(np.all(np.abs(v) <= 1 + 1e-9)),
-    }
+    return {"in_sphere": bool(np.linalg.norm(v) <= 1 + 1e-9), "in_box": bool(np.all(np.abs(v) <= 1 + 1e-9))}
 
 
 def scale_factors(
@@ -210,12 +205,7 @@ def compare_with_table(scale: xr.DataArray, design: pd.DataFrame, table: pd.Data
     reference = scale.copy(data=ref)
     abs_err = np.abs(scale - reference)
     ds = xr.Dataset(
-        {
-            "ours": scale,
-            "reference": reference,
-            "abs_error": abs_err,
-            "rel_error": abs_err / np.abs(reference),
-        },
+        {"ours": scale, "reference": reference, "abs_error": abs_err, "rel_error": abs_err / np.abs(reference)},
         coords={"marker": ("run", design["marker"].to_numpy(str))},
     )
     ds["reference"].attrs = {"units": "1", "long_name": "scale factor of Tables 3-4 (Chung & Venter 2024)"}

@@ -56,8 +56,7 @@ import numpy as np
 
 from workflow.actuator.mapping import map_pairs
 from workflow.actuator.pressure_limit import PressureLimit, clip_pressures, material_limit, smallest
-from workflow.cascade.finger import JOINTS
-from workflow.cascade.model import GROUPS
+from workflow.common.constants import GROUPS, JOINTS
 from workflow.fea_check.model import PatientFEA
 from workflow.fem.coupled import CoupledResult, solve_coupled
 

@@ -6,6 +6,7 @@ the dataset, the deformed meshes (.vtu) and the poses plot.
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -15,6 +16,7 @@ import xarray as xr
 from workflow.actuator.pressure_limit import material_limit
 from workflow.actuator.surrogates import load_surrogate
 from workflow.actuator.unit_model import load_unit_model
+from workflow.cascade.finger import Finger
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
 from workflow.common.constants import CHAMBERS, GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
@@ -25,7 +27,7 @@ from workflow.fea_check.plots import plot_fea_poses, plot_standalone
 from workflow.fea_check.run import run_fea_check
 from workflow.fea_check.standalone import MODELS, standalone_dataset
 
-__all__ = ["load_surrogate_angles", "write_fea_check", "write_standalone"]
+__all__ = ["PatientSetup", "load_patient_setup", "load_surrogate_angles", "write_fea_check", "write_standalone"]
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +39,45 @@ def load_surrogate_angles(surrogate_2d: str | None, surrogate_3d: str | None):
 
     s2, s3 = load_surrogate(surrogate_2d), load_surrogate(surrogate_3d)
     return s3.angle_deg, s2.angle_deg, float(s2.p_max_kpa), float(s3.p_max_kpa)
+
+
+@dataclass
+class PatientSetup:
+    """What a patient's FEA check starts from: the plan, the loads, the finger and the units per group."""
+
+    plan: xr.Dataset
+    loads: xr.Dataset
+    finger: Finger
+    spring_note: str
+    units_per_group: dict[str, int]
+    reference_dims_mm: dict[str, float]
+
+
+def load_patient_setup(
+    patient: Mapping[str, Any],
+    *,
+    plan_nc: str,
+    joint_loads_nc: str,
+    moments_nc: str,
+    ccd_nc: str,
+    cascade_cfg: Mapping,
+    anthropometry: Mapping,
+) -> PatientSetup:
+    """The one loader of a patient's FEA setup (the check and its mesh study): read the plan and the loads,
+    build the finger with its springs from the joint loads, take the plan's units per group (mm, kg, N m)."""
+    plan = open_result(plan_nc)
+    loads = open_result(joint_loads_nc)
+    finger, spring_note = patient_finger(
+        patient,
+        loads,
+        open_result(moments_nc),
+        open_result(ccd_nc),
+        cascade_cfg=cascade_cfg,
+        anthropometry=anthropometry,
+    )
+    upg = {str(g): int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
+    ref = {k: float(v["mean"]) for k, v in anthropometry["measures"].items()}
+    return PatientSetup(plan, loads, finger, spring_note, upg, ref)
 
 
 def write_fea_check(
@@ -68,23 +109,22 @@ def write_fea_check(
     correction step (config ``fea_check.correction``).
     """
 
-    plan = open_result(plan_nc)
-    loads = open_result(joint_loads_nc)
-    finger, spring_note = patient_finger(
+    s = load_patient_setup(
         patient,
-        loads,
-        open_result(moments_nc),
-        open_result(ccd_nc),
+        plan_nc=plan_nc,
+        joint_loads_nc=joint_loads_nc,
+        moments_nc=moments_nc,
+        ccd_nc=ccd_nc,
         cascade_cfg=cascade_cfg,
         anthropometry=anthropometry,
     )
-    upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
+    plan, finger, spring_note, upg = s.plan, s.finger, s.spring_note, s.units_per_group
     fea = build_patient_fea(
         finger,
         upg,
         actuator_cfg=actuator_cfg,
         cascade_cfg=cascade_cfg,
-        reference_dims_mm={k: float(v["mean"]) for k, v in anthropometry["measures"].items()},
+        reference_dims_mm=s.reference_dims_mm,
         fea_cfg=fea_cfg,
     )
     log.info("patient %s: %s; units %s; springs: %s", patient_name, fea.notes, upg, spring_note)

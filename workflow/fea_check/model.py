@@ -38,8 +38,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from workflow import fem
-from workflow.cascade.finger import JOINTS, Finger, _read_section_profile
-from workflow.cascade.model import GROUPS, unit_section
+from workflow.cascade.finger import Finger, _read_section_profile
+from workflow.cascade.model import unit_section
+from workflow.common.constants import GROUPS, JOINTS
 from workflow.fem._mesh import build_actuator_mesh
 from workflow.fem.coupled import CoupledSetup, cell_areas, couple_meshes, nodal_body_force
 from workflow.fem.finger2d import BONE, FLESH, SegmentProfile, build_finger_mesh

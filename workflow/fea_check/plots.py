@@ -14,7 +14,8 @@ import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 
-from workflow.cascade.finger import JOINTS, Finger  # noqa: E402
+from workflow.cascade.finger import Finger
+from workflow.common.constants import JOINTS
 
 __all__ = ["plot_fea_poses", "plot_standalone"]
 

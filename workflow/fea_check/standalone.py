@@ -26,8 +26,7 @@ import numpy as np
 import xarray as xr
 
 from workflow import fem
-from workflow.cascade.model import GROUPS
-from workflow.common.constants import CHAMBERS, CHECK_MAPPING_STATUS, SOLVER_STATUS
+from workflow.common.constants import CHAMBERS, CHECK_MAPPING_STATUS, GROUPS, SOLVER_STATUS
 from workflow.common.runlog import solved
 from workflow.fem._mesh import build_actuator_mesh
 from workflow.fem.actuator import solve_standalone

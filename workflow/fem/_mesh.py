@@ -32,6 +32,8 @@ The whole actuator is the same chain with ``sum(units_per_group)``
 chambers: ``build_actuator_mesh`` adds per-group cavity facet sets
 (``cavity_top_{group}`` / ``cavity_bottom_{group}``), the outer faces of the
 two sides and the backbone nodes, so that each group gets its own pressures.
+
+Over 400 lines: the unit's tensor-product grid, its layers and chambers, and the boundary sets every other engine module addresses are defined together.
 """
 
 from __future__ import annotations

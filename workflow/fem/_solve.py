@@ -10,6 +10,8 @@ lam) with adaptive steps: a step that diverges, produces an inverted element
 iterations is cut back and retried; a step that converges fast lets the next
 one grow.  A failed path is a result (``status`` > 0, last converged load),
 never an exception.
+
+Over 400 lines: the Newton path solve, its step control, line search and history are one loop.
 """
 
 from __future__ import annotations

@@ -53,6 +53,8 @@ meet the free end wall (a singular corner; 117 kPa at h = 1 mm).  The paper
 (Fig. 10) summed sum Fx (y - y_SL) + sum Fy L_R over the reactions at the end
 of the middle chamber; with the end free to slide there is no net force, so
 both terms reduce to our couple about any point.
+
+Over 400 lines: the unit's load cases (free, blocked, end holds) share its mesh sets, constraints and reported quantities.
 """
 
 from __future__ import annotations

@@ -17,12 +17,12 @@ import xarray as xr
 
 from workflow.actuator.unit_model import load_unit_model
 from workflow.cascade.model import solve_equilibrium
-from workflow.cascade.patient import patient_cascade, patient_finger
+from workflow.cascade.patient import patient_cascade
 from workflow.common.constants import JOINTS
-from workflow.common.provenance import open_result, write_dataset
+from workflow.common.provenance import write_dataset
 from workflow.common.runlog import solved
 from workflow.fea_check.check import applied_limit, check_exercise, gravity_state, pressures_2d
-from workflow.fea_check.entry import load_surrogate_angles
+from workflow.fea_check.entry import load_patient_setup, load_surrogate_angles
 from workflow.fea_check.model import build_patient_fea
 
 __all__ = ["write_check_study"]
@@ -62,17 +62,16 @@ def write_check_study(
     unit's at the applied pressures) with their time as the cheap stand-ins.
     """
 
-    plan = open_result(plan_nc)
-    loads = open_result(joint_loads_nc)
-    finger, _ = patient_finger(
+    s = load_patient_setup(
         patient,
-        loads,
-        open_result(moments_nc),
-        open_result(ccd_nc),
+        plan_nc=plan_nc,
+        joint_loads_nc=joint_loads_nc,
+        moments_nc=moments_nc,
+        ccd_nc=ccd_nc,
         cascade_cfg=cascade_cfg,
         anthropometry=anthropometry,
     )
-    upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}
+    plan, finger, upg = s.plan, s.finger, s.units_per_group
     a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d)
     ex = [str(e) for e in exercises]
     p3 = plan["pressure_kpa"].sel(exercise=ex).values
@@ -91,7 +90,7 @@ def write_check_study(
             upg,
             actuator_cfg=actuator_cfg,
             cascade_cfg=cascade_cfg,
-            reference_dims_mm={k: float(v["mean"]) for k, v in anthropometry["measures"].items()},
+            reference_dims_mm=s.reference_dims_mm,
             fea_cfg=dict(fea_cfg, h_actuator_mm=h, h_finger_mm=h),
         )
         grav = gravity_state(fea, solver)

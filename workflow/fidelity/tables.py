@@ -12,8 +12,9 @@ import numpy as np
 import xarray as xr
 
 from workflow.common import fidelity_choice
+from workflow.common.constants import JOINTS
 from workflow.fidelity import analysis as FD
-from workflow.musculoskeletal.moments import ACTIVATIONS, JOINTS, response_angles, response_name
+from workflow.musculoskeletal.moments import ACTIVATIONS, response_angles, response_name
 
 __all__ = ["fem_table"]
 

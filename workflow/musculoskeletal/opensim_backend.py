@@ -38,6 +38,8 @@ stretched antagonists win and the passive moment is positive and rises with
 flexion.  ``passive_tone_free_moment_nm`` is the same curve at activation 0
 (passive fibre forces and joint structures, no tone): zero at 0 deg and rising
 with flexion, the torsional spring of a relaxed finger.
+
+Over 400 lines: every OpenSim API call (scaling, joint structures, muscles, sampling) sits here, so that only this module touches opensim.
 """
 
 from __future__ import annotations

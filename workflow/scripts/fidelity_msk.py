@@ -1,4 +1,4 @@
-from workflow.fidelity.entry import write_msk_study
+from workflow.fidelity.entry_msk import write_msk_study
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821

@@ -1,5 +1,5 @@
 from workflow.scripts._common import setup_logging
-from workflow.stability.entry import write_rays
+from workflow.stability.entry_fem import write_rays
 
 setup_logging(snakemake)  # noqa: F821
 p = snakemake.params  # noqa: F821
