@@ -4,7 +4,7 @@ tests/slurm/start_slurm.sh installs Debian's slurm-wlm and munge if missing and 
 munged, slurmctld and slurmd on this machine (root only); the module fixture stops
 them again (tests/slurm/stop_slurm.sh) unless they were already running. The test
 runs `snakemake --profile profiles/slurm --configfile config/smoke.yaml <local> <targets>`
-(the smoke config's DOE, musculoskeletal and one FE sweep job) on a copy of the workflow and checks that every job went through SLURM: seen by squeue
+(one job of each kind: DOE, scaling, the OpenSim model and one sampling run, one FE sweep shard) on a copy of the workflow and checks that every job went through SLURM: seen by squeue
 while the run lasted and recorded COMPLETED in the job completion log.
 
 Skips, with the reason, where SLURM cannot be started here: not root, no apt-get or
@@ -37,14 +37,12 @@ JOBCOMP = Path("/var/log/slurm/jobcomp.log")  # JobCompLoc in start_slurm.sh
 PROFILE = yaml.safe_load((REPO / "profiles" / "slurm" / "config.yaml").read_text())
 PARTITION = PROFILE["default-resources"]["slurm_partition"]
 RUN_TIMEOUT_S = 900  # the smoke run through SLURM; the plugin can hang without a working status query
-# What goes through SLURM: the DOE and musculoskeletal stages of the smoke config
-# (OpenSim model, 15 sampling jobs, merge, RSM, both patients' loads) and one FE
-# sweep shard. The executor is what is tested here; the whole smoke DAG, with
-# its minutes of FEA, runs locally in tests/test_workflow.py (CI time budget).
+# What goes through SLURM: one job of each kind the workflow has (numpy-only DOE and scaling jobs, the
+# OpenSim model and one OpenSim sampling run, one FE sweep shard): six jobs, two at a time. The executor is
+# what is tested here; the whole smoke DAG runs locally in tests/test_workflow.py (CI time budget).
 SLURM_TARGETS = [
     "results/validation/scaling.nc",
-    "results/patients/mean/joint_loads.nc",
-    "results/patients/p01/joint_loads.nc",
+    "results/musculoskeletal/opensim/run1.nc",
     "results/actuator/sweep/2d/shard0.nc",
 ]
 

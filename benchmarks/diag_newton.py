@@ -1,0 +1,176 @@
+"""Why does Newton take many iterations per load step with contact?  A diagnosis, not a test.
+
+Runs the 2D unit (free, contact, P_B = 0) from 0 to ``--p`` kPa and records every
+Newton iteration: the load factor, the residual norm (as the solver measures it)
+and the set of active contact pairs (slave node, master facet).  Reports
+
+* steps accepted, cut-backs, iterations, and the median iterations per accepted step;
+* the share of iterations at which the active contact set changed from the previous
+  iteration of the same step, and the median iterations of steps with and without
+  such a change;
+* what changed: slaves entering or leaving contact, or switching master facet;
+* the observed convergence rate in the last iterations of each step,
+  ``log(r_{k+1}) / log(r_k)`` on residuals normalised by the step's first one
+  (2 for quadratic, 1 for linear convergence);
+* the accuracy of the contact tangent at the final state: the finite-difference
+  tangent the solver uses against a central difference with 10x and 100x larger
+  steps (their spread bounds its error), relative Frobenius norm.
+
+    python benchmarks/diag_newton.py [--h 1.0] [--p 300] [--smoothing 0.05]  -> benchmarks/out/diag_newton.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from workflow import fem  # noqa: E402
+from workflow.fem import _solve  # noqa: E402
+
+OUT = ROOT / "benchmarks" / "out"
+
+
+def _active_set(model, u, p_ref) -> frozenset:
+    x = model.positions(u, p_ref)
+    pairs = []
+    for k, pair in enumerate(model.contacts):
+        m, _, _, g, inside = pair._project(x)
+        act = inside & (np.abs(g) <= pair.search) & (g < pair.smoothing)
+        pairs += [(k, int(s), int(f)) for s, f in zip(pair.slave[act], m[act])]
+    return frozenset(pairs)
+
+
+def _tangent_spread(model, u, p_ref) -> dict:
+    """The solver's FD contact tangent against the same difference with 10x and 100x the step."""
+    x = model.positions(u, p_ref)
+    out = {}
+    for pair in model.contacts:
+        m, _, _, g, inside = pair._project(x)
+        act = inside & (np.abs(g) <= pair.search) & (g < pair.smoothing)
+        if not act.any():
+            continue
+        ma = m[act]
+        nodes = np.concatenate([pair.slave[act, None], pair._nodes_2d(ma)], axis=1)
+        lim = (pair.lo[ma], pair.hi[ma], pair.prev[ma] >= 0, pair.next[ma] >= 0)
+        X = x[:, nodes].transpose(1, 2, 0)
+        w = model.penalty * pair.penalty_factor * pair.area[act]
+        nc = X.shape[0]
+        nd = X.shape[1] * X.shape[2]
+        Ks = {}
+        for mult in (1.0, 10.0, 100.0):
+            step = mult * 1e-7 * max(1.0, float(np.abs(X).max()))
+            E = np.eye(nd) * step
+            Xf = X.reshape(nc, -1)
+            Xb = np.concatenate([Xf[None] + E[:, None, :], Xf[None] - E[:, None, :]])
+            limb = tuple(np.tile(a, (2 * nd,) + (1,) * (a.ndim - 1)) for a in lim)
+            fb = pair._local_force(Xb.reshape((-1,) + X.shape[1:]), np.tile(w, 2 * nd), limb)
+            fb = fb.reshape(2, nd, nc, nd)
+            Ks[mult] = ((fb[0] - fb[1]) / (2 * step)).transpose(1, 2, 0)
+        ref = np.linalg.norm(Ks[1.0])
+        out = {
+            "n_active": int(nc),
+            "rel_diff_10x": float(np.linalg.norm(Ks[10.0] - Ks[1.0]) / ref),
+            "rel_diff_100x": float(np.linalg.norm(Ks[100.0] - Ks[1.0]) / ref),
+        }
+        break
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--h", type=float, default=1.0, help="element size, mm")
+    ap.add_argument("--p", type=float, default=300.0, help="P_T at the end of the ray, kPa")
+    ap.add_argument("--smoothing", type=float, default=None, help="contact smoothing band, mm (default: the model's)")
+    ap.add_argument("--out", default="diag_newton.json", help="file name under benchmarks/out/")
+    args = ap.parse_args(argv)
+
+    records: list[dict] = []
+    orig = _solve.Model.evaluate
+
+    def evaluate(self, u, lam, p_ref, tangent=True):
+        r, K, info = orig(self, u, lam, p_ref, tangent)
+        if tangent and r is not None:
+            rr = self.T.T @ r
+            ri = info["r_internal"]
+            records.append(
+                {
+                    "lam": float(lam),
+                    "norm": float(np.sqrt(rr @ rr + ri @ ri)),
+                    "active": _active_set(self, u, p_ref),
+                    "u": u,
+                    "p_ref": p_ref,
+                    "model": self,
+                }
+            )
+        return r, K, info
+
+    _solve.Model.evaluate = evaluate
+    try:
+        t0 = time.perf_counter()
+        copts = {} if args.smoothing is None else {"smoothing_mm": args.smoothing}
+        res = fem.solve_unit({"dim": 2, "h": args.h}, args.p, 0.0, case="free", contact=True, contact_options=copts)
+        wall = time.perf_counter() - t0
+    finally:
+        _solve.Model.evaluate = orig
+
+    # group the iterations by load step attempt: a new attempt starts when lam changes
+    attempts: list[list[dict]] = []
+    for rec in records:
+        if not attempts or rec["lam"] != attempts[-1][0]["lam"]:
+            attempts.append([])
+        attempts[-1].append(rec)
+    iters = np.array([int(h["iterations"]) for h in res.history])
+    changed_steps, plain_steps, changes, n_it, rates = [], [], 0, 0, []
+    kinds = {"entered": 0, "left": 0, "switched_facet": 0}
+    for att in attempts:
+        for a, b in zip(att, att[1:]):
+            sa = {(k, s): f for k, s, f in a["active"]}
+            sb = {(k, s): f for k, s, f in b["active"]}
+            kinds["entered"] += len(sb.keys() - sa.keys())
+            kinds["left"] += len(sa.keys() - sb.keys())
+            kinds["switched_facet"] += sum(sa[s] != sb[s] for s in sa.keys() & sb.keys())
+        ch = sum(a["active"] != b["active"] for a, b in zip(att, att[1:]))
+        changes += ch
+        n_it += max(len(att) - 1, 0)
+        (changed_steps if ch else plain_steps).append(len(att) - 1)
+        r = np.array([a["norm"] for a in att]) / max(att[0]["norm"], 1e-300)
+        if len(r) >= 3 and r[-2] < 1 and r[-3] < 1 and r[-2] > 0 and r[-1] > 0:
+            rates.append(float(np.log(r[-1]) / np.log(r[-2])))
+    last = records[-1]
+    out = {
+        "h_mm": args.h,
+        "smoothing_mm": args.smoothing if args.smoothing is not None else fem.DEFAULT_CONTACT["smoothing_mm"],
+        "p_top_kpa": args.p,
+        "status": int(res.status),
+        "load_factor": float(res.load_factor),
+        "angle_deg": float(res.bending_angle_deg),
+        "wall_time_s": round(wall, 2),
+        "accepted_steps": int(len(res.history)),
+        "attempts": len(attempts),
+        "cut_backs": len(attempts) - len(res.history),
+        "iterations_total": int(sum(len(a) - 1 for a in attempts)),
+        "median_iterations_per_accepted_step": float(np.median(iters)) if iters.size else float("nan"),
+        "share_of_iterations_with_active_set_change": changes / max(n_it, 1),
+        "median_iterations_steps_with_change": float(np.median(changed_steps)) if changed_steps else float("nan"),
+        "median_iterations_steps_without_change": float(np.median(plain_steps)) if plain_steps else float("nan"),
+        "median_final_rate": float(np.median(rates)) if rates else float("nan"),
+        "active_set_changes_by_kind": kinds,
+        "iterations_of_failed_attempts": int(sum(len(a) - 1 for a in attempts) - iters.sum()),
+        "contact_tangent": _tangent_spread(last["model"], last["u"], last["p_ref"]),
+    }
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / args.out).write_text(json.dumps(out, indent=2))
+    print(json.dumps(out, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
