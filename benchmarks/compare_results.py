@@ -8,7 +8,8 @@ Every ``.nc`` file under ``RESULTS_A`` is opened beside the same path under
 ``RESULTS_B``; every data variable and coordinate must agree to ``tol``
 (``|a - b| <= tol * (1 + |b|)``, NaN equal to NaN, inf to inf, strings exactly).  Left
 out: wall times and memory peaks (they are measurements of the machine, not
-results) and all attributes (provenance: commit, code hash, package versions).
+results), all attributes (provenance: commit, code hash, package versions) and the
+run ledger's copies of the datasets (``tracking/artifacts/<random run id>/``).
 Exits 1 and lists the differences when any value differs or a file or
 variable is missing on one side.  Not a test: a tool for refactors.
 """
@@ -23,8 +24,14 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-#: Variables that measure the run rather than the result.
-MEASURED = re.compile(r"wall_time|time_s$|_seconds$|peak_rss|peak_mb|tracemalloc|elapsed")
+#: Variables that measure the run rather than the result (and the Pareto flags, which rank those times).
+MEASURED = re.compile(r"wall_time|time_s$|_seconds$|peak_rss|peak_mb|tracemalloc|elapsed|^pareto$")
+#: A wall time quoted inside a text (a choice's reason): masked before strings are compared.
+QUOTED_TIME = re.compile(r"\d+(\.\d+)?(e[+-]?\d+)? s\b")
+
+
+def _masked(v: np.ndarray) -> np.ndarray:
+    return np.vectorize(lambda s: QUOTED_TIME.sub("<t> s", str(s)), otypes=[object])(v) if v.size else v.astype(str)
 
 
 def compare_datasets(a: xr.Dataset, b: xr.Dataset, tol: float) -> list[str]:
@@ -49,15 +56,20 @@ def compare_datasets(a: xr.Dataset, b: xr.Dataset, tol: float) -> list[str]:
                     f"{n}: {int(np.count_nonzero(~same))} of {same.size} values differ "
                     f"(first: {x.ravel()[k]!r} vs {y.ravel()[k]!r})"
                 )
-        elif not np.array_equal(va.astype(str), vb.astype(str)):
+        elif not np.array_equal(_masked(va), _masked(vb)):
             out.append(f"{n}: values differ")
     return out
 
 
+def _ledger_copy(rel: Path) -> bool:
+    """MLflow's copies of the datasets (under a random run id): the originals are compared instead."""
+    return rel.parts[:2] == ("tracking", "artifacts")
+
+
 def compare_trees(root_a: Path, root_b: Path, tol: float) -> dict[str, list[str]]:
     """Per relative path, the differences (empty list: equal)."""
-    files_a = {p.relative_to(root_a) for p in root_a.rglob("*.nc")}
-    files_b = {p.relative_to(root_b) for p in root_b.rglob("*.nc")}
+    files_a = {p.relative_to(root_a) for p in root_a.rglob("*.nc") if not _ledger_copy(p.relative_to(root_a))}
+    files_b = {p.relative_to(root_b) for p in root_b.rglob("*.nc") if not _ledger_copy(p.relative_to(root_b))}
     report = {str(f): [f"only in {'A' if f in files_a else 'B'}"] for f in sorted(files_a ^ files_b)}
     for f in sorted(files_a & files_b):
         with xr.open_dataset(root_a / f) as a, xr.open_dataset(root_b / f) as b:

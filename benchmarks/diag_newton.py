@@ -8,7 +8,9 @@ and the set of active contact pairs (slave node, master facet).  Reports
 * the share of iterations at which the active contact set changed from the previous
   iteration of the same step, and the median iterations of steps with and without
   such a change;
-* what changed: slaves entering or leaving contact, or switching master facet;
+* what changed: slaves entering or leaving contact, or switching master facet; how many enter already
+  penetrating, and whether they came from inside a master facet's range (through the band) or from outside every
+  facet's range (an edge);
 * the observed convergence rate in the last iterations of each step,
   ``log(r_{k+1}) / log(r_k)`` on residuals normalised by the step's first one
   (2 for quadratic, 1 for linear convergence);
@@ -38,13 +40,23 @@ from workflow.fem import _solve  # noqa: E402
 OUT = ROOT / "benchmarks" / "out"
 
 
+def _slave_states(model, u, p_ref) -> dict:
+    """(pair, slave) -> (inside a master facet's range, gap mm) for every slave."""
+    x = model.positions(u, p_ref)
+    out = {}
+    for k, pair in enumerate(model.contacts):
+        _, _, _, g, inside = pair._project(x)
+        out.update({(k, int(s)): (bool(i), float(gg)) for s, i, gg in zip(pair.slave, inside, g)})
+    return out
+
+
 def _active_set(model, u, p_ref) -> frozenset:
     x = model.positions(u, p_ref)
     pairs = []
     for k, pair in enumerate(model.contacts):
         m, _, _, g, inside = pair._project(x)
         act = inside & (np.abs(g) <= pair.search) & (g < pair.smoothing)
-        pairs += [(k, int(s), int(f)) for s, f in zip(pair.slave[act], m[act])]
+        pairs += [(k, int(s), int(f), round(float(gg), 6)) for s, f, gg in zip(pair.slave[act], m[act], g[act])]
     return frozenset(pairs)
 
 
@@ -105,6 +117,7 @@ def main(argv=None) -> int:
                     "lam": float(lam),
                     "norm": float(np.sqrt(rr @ rr + ri @ ri)),
                     "active": _active_set(self, u, p_ref),
+                    "states": _slave_states(self, u, p_ref),
                     "u": u,
                     "p_ref": p_ref,
                     "model": self,
@@ -130,14 +143,24 @@ def main(argv=None) -> int:
     iters = np.array([int(h["iterations"]) for h in res.history])
     changed_steps, plain_steps, changes, n_it, rates = [], [], 0, 0, []
     kinds = {"entered": 0, "left": 0, "switched_facet": 0}
+    entry_gaps, exit_gaps = [], []
+    how = {"through_band": 0, "from_outside_facet_range": 0}
     for att in attempts:
         for a, b in zip(att, att[1:]):
-            sa = {(k, s): f for k, s, f in a["active"]}
-            sb = {(k, s): f for k, s, f in b["active"]}
+            sa = {(k, s): f for k, s, f, _ in a["active"]}
+            sb = {(k, s): f for k, s, f, _ in b["active"]}
+            gb = {(k, s): g for k, s, _, g in b["active"]}
+            ga = {(k, s): g for k, s, _, g in a["active"]}
+            entry_gaps += [gb[s] for s in sb.keys() - sa.keys()]
+            for s in sb.keys() - sa.keys():
+                if gb[s] < 0:  # entered already penetrating: from outside every facet's range, or through the band?
+                    prev_inside, prev_g = a["states"].get(s, (False, np.inf))
+                    how[("through_band" if prev_inside else "from_outside_facet_range")] += 1
+            exit_gaps += [ga[s] for s in sa.keys() - sb.keys()]
             kinds["entered"] += len(sb.keys() - sa.keys())
             kinds["left"] += len(sa.keys() - sb.keys())
             kinds["switched_facet"] += sum(sa[s] != sb[s] for s in sa.keys() & sb.keys())
-        ch = sum(a["active"] != b["active"] for a, b in zip(att, att[1:]))
+        ch = sum({x[:3] for x in a["active"]} != {x[:3] for x in b["active"]} for a, b in zip(att, att[1:]))
         changes += ch
         n_it += max(len(att) - 1, 0)
         (changed_steps if ch else plain_steps).append(len(att) - 1)
@@ -163,6 +186,16 @@ def main(argv=None) -> int:
         "median_iterations_steps_without_change": float(np.median(plain_steps)) if plain_steps else float("nan"),
         "median_final_rate": float(np.median(rates)) if rates else float("nan"),
         "active_set_changes_by_kind": kinds,
+        # a slave that enters (or leaves) the band already penetrating jumps the force: the C1 law does not see it
+        "entries_already_penetrating": int(np.sum(np.array(entry_gaps) < 0)),
+        "penetrating_entries_by_previous_state": how,
+        "entry_gap_mm_quantiles_5_50_95": np.quantile(entry_gaps, [0.05, 0.5, 0.95]).round(5).tolist()
+        if entry_gaps
+        else [],
+        "exits_while_penetrating": int(np.sum(np.array(exit_gaps) < 0)),
+        "exit_gap_mm_quantiles_5_50_95": np.quantile(exit_gaps, [0.05, 0.5, 0.95]).round(5).tolist()
+        if exit_gaps
+        else [],
         "iterations_of_failed_attempts": int(sum(len(a) - 1 for a in attempts) - iters.sum()),
         "contact_tangent": _tangent_spread(last["model"], last["u"], last["p_ref"]),
     }

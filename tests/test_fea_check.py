@@ -273,7 +273,7 @@ def _fake_fea(monkeypatch, truth):
             0.0,
         )
 
-    monkeypatch.setattr(FC, "check_exercise", fake_check)
+    monkeypatch.setattr(correction, "check_exercise", fake_check)  # where the correction step looks it up
     return fake_check
 
 
