@@ -22,7 +22,7 @@ REPO = settings.REPO_ROOT
 SNAKEMAKE = [sys.executable, "-m", "snakemake"]
 # Every job (local or on a cluster, where sbatch exports the environment) gets one BLAS/OpenMP thread.
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-WORKFLOW_FILES = ("Snakefile", "rules", "config", "resources", "report")
+WORKFLOW_FILES = ("Snakefile", "rules", "config", "resources", "report", "envs")
 
 
 def copy_workflow(dst: Path, extra: tuple[str, ...] = ()) -> None:
