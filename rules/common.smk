@@ -172,6 +172,21 @@ def get_actuator_part(*keys):
     return {k: v for k, v in config["actuator"].items() if k in keys}
 
 
+def get_stability_slice(study, *actuator_keys):
+    """The config one stability FE study depends on: its own settings and the actuator sections it uses."""
+    return {"stability": {study: config["stability"][study]}, "actuator": get_actuator_part(*actuator_keys)}
+
+
+def get_maps_slice():
+    """The config the stability maps depend on (their labels: meshes, contact, the plans' surrogate, the patients)."""
+    return {
+        "stability": config["stability"],
+        "actuator": get_actuator_part("mesh", "contact"),
+        "cascade": {"surrogate": config["cascade"]["surrogate"]},
+        "patients": PATIENTS,
+    }
+
+
 def get_validation_patient():
     """The config entry of the patient compared with the paper (cascade.validation_patient)."""
     return config["patients"][config["cascade"]["validation_patient"]]

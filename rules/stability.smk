@@ -20,10 +20,7 @@ rule stability_rays:
         rays=config["stability"]["rays"],
         # only the parts of the unit model the rays use (not its sweep or check settings)
         actuator=get_actuator_part("geometry", "material", "mesh", "contact", "solver"),
-        config_slice={
-            "stability": {"rays": config["stability"]["rays"]},
-            "actuator": get_actuator_part("geometry", "material", "mesh", "contact", "solver"),
-        },
+        config_slice=get_stability_slice("rays", "geometry", "material", "mesh", "contact", "solver"),
     script:
         "../workflow/scripts/stability_rays.py"
 
@@ -42,10 +39,7 @@ rule stability_locking:
     params:
         locking=config["stability"]["locking"],
         actuator=get_actuator_part("geometry", "material", "solver"),
-        config_slice={
-            "stability": {"locking": config["stability"]["locking"]},
-            "actuator": get_actuator_part("geometry", "material", "solver"),
-        },
+        config_slice=get_stability_slice("locking", "geometry", "material", "solver"),
     script:
         "../workflow/scripts/stability_locking.py"
 
@@ -102,11 +96,6 @@ rule stability_maps:
         actuator=get_actuator_part("mesh", "contact"),
         stability=config["stability"],
         cascade_surrogate=config["cascade"]["surrogate"],
-        config_slice={
-            "stability": config["stability"],
-            "actuator": get_actuator_part("mesh", "contact"),
-            "cascade": {"surrogate": config["cascade"]["surrogate"]},
-            "patients": PATIENTS,
-        },
+        config_slice=get_maps_slice(),
     script:
         "../workflow/scripts/stability_maps.py"

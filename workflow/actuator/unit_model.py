@@ -1,4 +1,4 @@
-"""A unit's bending angle under an external end moment, and inverse pressure queries.
+"""A unit's bending angle under an external end moment (the inverse queries are :mod:`.unit_inverse`).
 
 Model.  At pressures P = (P_T, P_B) a unit (one chamber)
 has two measured ends of its moment-angle curve: the free bending angle

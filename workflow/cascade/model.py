@@ -1,4 +1,4 @@
-"""Cascade of reduced-order actuator units on a finger: forward model and planning.
+"""Cascade of reduced-order actuator units on a finger: the forward model and its equilibrium.
 
 Model (planar, the finger's sagittal plane; frame and signs of :mod:`workflow.cascade.finger`)
 -------------------------------------------------------------------------------------
@@ -35,14 +35,7 @@ static equilibrium that can be solved for any pressures:
   continuation in pressure).  Failure is a status in the result, never an
   exception.
 
-Planning: per exercise, the moments the actuator must supply at the target pose
-follow directly (``m*_X = spring_X(theta*_X) - G_X(theta*)``, the paper's Table 7
-logic).  Per span, a grid search (no gradients, so piecewise-constant
-surrogates such as KNN work) finds the pressures of least sum of squares
-whose bend under ``m*_X`` lies within ``tol - margin`` of the
-target; the coupled forward model then checks the pose, the angle tolerance and
-the active safety limits (``|m_X| <= limit_X``), halving the span goal when the
-pose drifts out.  ``P_CMC`` may be tied to ``P_MCP`` as in all the paper's plans.
+Planning on this model is :mod:`workflow.cascade.planning`.
 
 The unit response object is injected: anything with vectorised
 ``angle_deg(p_top_kpa, p_bottom_kpa, m_ext_nm)``, ``free_angle_deg(p_top, p_bottom)``

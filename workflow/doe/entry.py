@@ -1,7 +1,7 @@
-"""File-level entry points of the DOE and musculoskeletal stages.
+"""Rule entry points of the DOE stage: the design, the scale factors per run, their check against Tables 3-4.
 
 Each function reads its inputs from paths, calls the pure science in
-:mod:`workflow.doe` and :mod:`workflow.musculoskeletal`, and writes one dataset
+:mod:`workflow.doe.ccd`, and writes one dataset
 with provenance.  The Snakemake ``script:`` adapters call exactly one of them;
 tests call them directly.
 """

@@ -1,4 +1,4 @@
-"""FEA check of every planned exercise (paper section 3.2, Fig. 18-21).
+"""FEA check of one planned exercise (paper section 3.2, Fig. 18-21); the whole plan is :mod:`.run`.
 
 Per patient: the whole actuator of the plan (``units_per_group``) strapped to
 the planar finger (:mod:`workflow.fea_check.model`), gravity first (one solve,

@@ -1,12 +1,9 @@
-"""File-level entry points of the fidelity stage.
+"""Rule entry points of the fidelity stage's file-level steps (its FE, OpenSim and FEA-check studies have
+modules of their own: :mod:`.entry_fem`, :mod:`.entry_msk`, :mod:`.entry_check`).
 
 * :func:`write_fem_choice` -- the FE unit cases (:mod:`workflow.fidelity.entry_fem`) against the finest converged one of
   their model, and the cheapest case per model within the tolerance (what the
   sweeps and the unit check then use when ``fidelity.auto`` is on);
-* :func:`write_msk_study` -- response surfaces against direct OpenSim
-  sampling at test patients, inside and outside the design region;
-* :func:`write_check_study` -- the finger-actuator FEA check of a few
-  exercises at several meshes, against the reduced-order chains;
 * :func:`write_speed_accuracy` -- everything on one (method, quantity) table
   with the Pareto fronts and the chart.
 

@@ -1,4 +1,4 @@
-"""Our OpenSim moments against the authors' export (item 5).
+"""Our OpenSim moments against the authors' export (the joint moments at the CCD runs).
 
 For every response column of the export (e.g. ``F3_P_MCP_90``: middle finger,
 passive, MCP at 90 deg) and each of the 15 CCD runs (matched by coded levels):

@@ -1,8 +1,7 @@
-"""File-level entry points of the stability stage: the two FE studies and the maps.
+"""Rule entry point of the stability maps (the two FE studies are :mod:`.entry_fem`).
 
 The science is in `workflow.stability` (pure functions: rays, samples, design) and the figures in
-`workflow.stability.plots`; this module calls the FE solver, reads and writes
-files.  Units: kPa, degree, mm, N m.
+`workflow.stability.plots`; this module reads and writes files.  Units: kPa, degree, mm, N m.
 """
 
 from __future__ import annotations

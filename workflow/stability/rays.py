@@ -1,27 +1,8 @@
-"""Stability maps: where each method of the workflow fails or degrades.
+"""Extra FE rays of the 2D unit by mesh, contact and formulation: where Newton fails over the pressure plane.
 
-Five maps, each a function of datasets the workflow already writes, plus two
-small FE studies of their own:
-
-1. **Newton failures** over the pressure plane (P_T, P_B), by mesh and
-   formulation: the sweeps' per-sample ``status`` and extra 2D rays at other
-   element sizes, with and without contact, mixed and plain displacement
-   elements (`ray_statuses`, `rays_dataset`).  `fe_samples` puts every source
-   into one long table on a ``sample`` dimension; `failure_counts` counts the
-   statuses of the *solved* samples (mirrored ones are copies, not solves).
-2. **Volumetric locking**: free angle of the 2D unit against K/mu0 for the
-   mean-dilatation (mixed) and the plain Q1 displacement formulation
-   (`locking_dataset`, `locking_ratio`).
-3. **Contact penetration** against a stated bound (`penetration_summary`).
-4. **Surrogate queries outside the sampled grid**: `SampledRegion` (convex
-   hull of the converged samples plus the unloaded origin, and which sample is
-   nearest) flags a query (P_T, P_B) outside the hull, outside the sampled
-   range or nearest to a sample that failed; `flag_pressure_table` applies it
-   to a cascade plan's pressures.
-5. **Response surfaces outside |x| <= 1** (`design_range_table`,
-   `scaled_prediction_variance`: how the quadratic CCD model's prediction
-   variance grows outside the design sphere) and **exercises with no feasible
-   pressures** (`feasibility_table`).
+The sweeps' per-sample ``status`` and these rays (`ray_statuses`, `rays_dataset`) feed the stability maps; the
+tables built from every FE sample are :mod:`.samples`, the design-region checks :mod:`.design` and the
+surrogates' sampled region :mod:`workflow.actuator.sampled_region`.
 
 Units: pressures kPa, angles degree, lengths mm, moments N m.  Status codes of
 FE samples are the sweep's (`workflow.common.constants.SWEEP_SAMPLE_STATUS`, 0 = converged).
