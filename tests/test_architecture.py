@@ -199,6 +199,7 @@ def test_user_facing_text_cites_the_paper_not_our_tracker():
                 "grep",
                 "-n",
                 "-I",
+                "-i",
                 "-E",
                 r"issue [0-9]|CLARIFICATIONS",
                 "--",
