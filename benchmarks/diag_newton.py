@@ -142,6 +142,7 @@ def main(argv=None) -> int:
         attempts[-1].append(rec)
     iters = np.array([int(h["iterations"]) for h in res.history])
     changed_steps, plain_steps, changes, n_it, rates = [], [], 0, 0, []
+    rates_changed, rates_plain = [], []
     kinds = {"entered": 0, "left": 0, "switched_facet": 0}
     entry_gaps, exit_gaps = [], []
     how = {"through_band": 0, "from_outside_facet_range": 0}
@@ -167,6 +168,7 @@ def main(argv=None) -> int:
         r = np.array([a["norm"] for a in att]) / max(att[0]["norm"], 1e-300)
         if len(r) >= 3 and r[-2] < 1 and r[-3] < 1 and r[-2] > 0 and r[-1] > 0:
             rates.append(float(np.log(r[-1]) / np.log(r[-2])))
+            (rates_changed if ch else rates_plain).append(rates[-1])
     last = records[-1]
     out = {
         "h_mm": args.h,
@@ -185,6 +187,8 @@ def main(argv=None) -> int:
         "median_iterations_steps_with_change": float(np.median(changed_steps)) if changed_steps else float("nan"),
         "median_iterations_steps_without_change": float(np.median(plain_steps)) if plain_steps else float("nan"),
         "median_final_rate": float(np.median(rates)) if rates else float("nan"),
+        "median_final_rate_steps_without_change": float(np.median(rates_plain)) if rates_plain else float("nan"),
+        "median_final_rate_steps_with_change": float(np.median(rates_changed)) if rates_changed else float("nan"),
         "active_set_changes_by_kind": kinds,
         # a slave that enters (or leaves) the band already penetrating jumps the force: the C1 law does not see it
         "entries_already_penetrating": int(np.sum(np.array(entry_gaps) < 0)),
