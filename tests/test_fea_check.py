@@ -397,3 +397,32 @@ def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
     assert tried == [(2, 2.0), (3, 4.0), (3, 3.0)]  # coarse first, whatever the order given
     row = ds.sel(exercise="TGE2", model="3d_plan")
     assert float(row["h_used_mm"]) == 3.0 and bool(row["converged"]) and float(row["wall_time_s"]) == 2.0
+
+
+def test_a_stalled_whole_actuator_solve_is_retried_with_the_restarts_over_each_other(monkeypatch):
+    """The gravity or exercise solve that stalls is solved again from the same start, each restart applied over
+    the previous ones; the first full solve wins, else the one that got furthest."""
+    from dataclasses import dataclass, field
+    from types import SimpleNamespace
+
+    from workflow.fea_check import check as FC
+
+    @dataclass
+    class Setup:
+        contact: dict = field(default_factory=lambda: {"smoothing_mm": 0.01})
+
+    seen = []
+
+    def fake_solve(setup, pressures, solver=None, u_gravity=None):
+        seen.append((setup.contact["smoothing_mm"], solver.get("max_step"), u_gravity))
+        ok = setup.contact["smoothing_mm"] >= 0.1 and solver.get("max_step") == 0.02
+        return SimpleNamespace(status=0 if ok else 1, load_factor=1.0 if ok else 0.3 + 0.1 * len(seen))
+
+    monkeypatch.setattr(FC, "solve_coupled", fake_solve)
+    restarts = ({"contact": {"smoothing_mm": 0.1}}, {"solver": {"max_step": 0.02}})
+    fea = SimpleNamespace(setup=Setup(), restarts=restarts)
+    res = FC.solve_with_restarts(fea, {}, {"max_step": 0.25}, u_gravity="g")
+    assert res.status == 0 and seen == [(0.01, 0.25, "g"), (0.1, 0.25, "g"), (0.1, 0.02, "g")]
+    seen.clear()
+    res = FC.solve_with_restarts(SimpleNamespace(setup=Setup(), restarts=restarts[:1]), {}, {"max_step": 0.25})
+    assert res.status == 1 and res.load_factor == pytest.approx(0.5)  # the furthest of the two attempts

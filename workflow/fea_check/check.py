@@ -49,7 +49,7 @@ from __future__ import annotations
 import logging
 import time
 import tracemalloc
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Mapping
 
 import numpy as np
@@ -60,7 +60,15 @@ from workflow.common.constants import GROUPS, JOINTS
 from workflow.fea_check.model import PatientFEA
 from workflow.fem.coupled import CoupledResult, solve_coupled
 
-__all__ = ["applied_limit", "pressures_2d", "ExerciseCheck", "outcome", "check_exercise", "gravity_state"]
+__all__ = [
+    "applied_limit",
+    "pressures_2d",
+    "ExerciseCheck",
+    "outcome",
+    "check_exercise",
+    "gravity_state",
+    "solve_with_restarts",
+]
 
 log = logging.getLogger(__name__)
 
@@ -111,9 +119,35 @@ def pressures_2d(
     return p2, flag
 
 
+def solve_with_restarts(
+    fea: PatientFEA, pressures: Mapping, solver: Mapping, u_gravity: np.ndarray | None = None
+) -> CoupledResult:
+    """``solve_coupled``, and if it stalls, again from the same start with each of ``fea.restarts`` applied over the
+    previous ones (contact band mm, solver options); the first full solve, else the one that got furthest."""
+    best = solve_coupled(fea.setup, pressures, solver=solver, u_gravity=u_gravity)
+    contact, opts = dict(fea.setup.contact), dict(solver)
+    for k, r in enumerate(fea.restarts, start=2):
+        if best.status == 0:
+            break
+        contact.update(dict(r.get("contact", {})))
+        opts.update(dict(r.get("solver", {})))
+        res = solve_coupled(replace(fea.setup, contact=dict(contact)), pressures, solver=opts, u_gravity=u_gravity)
+        log.info(
+            "attempt %d (band %g mm, %s): status %d at load factor %.3f",
+            k,
+            contact.get("smoothing_mm", 0.0),
+            {key: v for key, v in opts.items() if key in ("predictor", "max_step")},
+            res.status,
+            res.load_factor,
+        )
+        if res.status == 0 or res.load_factor > best.load_factor:
+            best = res
+    return best
+
+
 def gravity_state(fea: PatientFEA, solver: Mapping) -> CoupledResult:
     """The finger and actuator under their weight alone (zero pressure)."""
-    return solve_coupled(fea.setup, {}, solver=solver)
+    return solve_with_restarts(fea, {}, solver)
 
 
 @dataclass
@@ -169,7 +203,7 @@ def check_exercise(
     t0 = time.perf_counter()
     tracemalloc.start()
     p = {g: (float(pressures_kpa[i, 0]), float(pressures_kpa[i, 1])) for i, g in enumerate(GROUPS)}
-    res = solve_coupled(fea.setup, p, solver=solver, u_gravity=None if gravity is None else gravity.state)
+    res = solve_with_restarts(fea, p, solver, u_gravity=None if gravity is None else gravity.state)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     W = fea.width_mm

@@ -57,6 +57,8 @@ DEFAULT_FEA_CHECK: dict[str, Any] = {
     "slide_stiffness_n_per_mm": 1.0e-6,
     "tip_min_depth_ratio": 0.35,
     "penetration_bound_mm": 0.1,
+    # the retry that passes the blocks' first corner contact (measured on the mean finger's gravity phase)
+    "restarts": ({"contact": {"smoothing_mm": 0.1}, "solver": {"predictor": False, "max_step": 0.02}},),
 }
 
 
@@ -134,6 +136,9 @@ class PatientFEA:
     width_mm: float
     base_x_mm: float
     notes: str
+    #: retries of a stalled solve, each over the previous (config ``fea_check.restarts``): the blocks' first corner
+    #: contact stalls the whole actuator as it stalls a unit ray; a wider band with small steps passes it
+    restarts: tuple = ()
 
 
 def build_patient_fea(
@@ -211,7 +216,10 @@ def build_patient_fea(
         f"actuator {target[-1] * W:.4g} N; strap {setup.strap_k:g} N/mm per mm; flesh mu {mu_f:.4g} MPa; "
         f"{cm.mesh.p.shape[1] * 2} dofs"
     )
-    return PatientFEA(setup=setup, finger=finger, units_per_group=counts, width_mm=W, base_x_mm=base_x, notes=notes)
+    restarts = tuple(fc["restarts"])
+    return PatientFEA(
+        setup=setup, finger=finger, units_per_group=counts, width_mm=W, base_x_mm=base_x, notes=notes, restarts=restarts
+    )
 
 
 __all__ += ["JOINTS"]
