@@ -314,18 +314,7 @@ def merge_shards(shards: Iterable[xr.Dataset | str | Path], *, n_ratios: int, n_
     parts = [open_result(s) if isinstance(s, (str, Path)) else s for s in shards]
     if not parts:
         raise ValueError("no shards to merge")
-    keys = [
-        "p_top_kpa",
-        "p_bottom_kpa",
-        "bending_angle_deg",
-        "bending_moment_nm",
-        "status",
-        "newton_iterations",
-        "wall_time_s",
-        "ray",
-        "ratio",
-        "scale",
-    ]
+    keys = [*SAMPLE_FIELDS, "ray", "ratio", "scale"]
     keys += [k for k in CHECK_FIELDS if all(k in p for p in parts)]  # a twin's checks hold for its mirror too
     d = {k: np.concatenate([p[k].values for p in parts]) for k in keys}
     rays, counts = np.unique(d["ray"], return_counts=True)

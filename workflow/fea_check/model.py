@@ -40,7 +40,7 @@ import numpy as np
 from workflow import fem
 from workflow.cascade.finger import Finger, _read_section_profile
 from workflow.cascade.model import unit_section
-from workflow.common.constants import GROUPS, JOINTS
+from workflow.common.constants import GROUPS
 from workflow.fem._mesh import build_actuator_mesh
 from workflow.fem.coupled import CoupledSetup, cell_areas, couple_meshes, nodal_body_force
 from workflow.fem.finger2d import BONE, FLESH, SegmentProfile, build_finger_mesh
@@ -220,6 +220,3 @@ def build_patient_fea(
     return PatientFEA(
         setup=setup, finger=finger, units_per_group=counts, width_mm=W, base_x_mm=base_x, notes=notes, restarts=restarts
     )
-
-
-__all__ += ["JOINTS"]

@@ -18,6 +18,26 @@ from workflow.stability.rays import LOCKING_FORMULATIONS, method_name, ray_last_
 __all__ = ["fe_samples", "failure_counts", "locking_dataset", "locking_ratio", "penetration_summary"]
 
 
+def _add_unit_cases(add, name: str, ds: xr.Dataset) -> None:
+    """Add a unit check's (or FE-study case's) rays, one per case; their statuses are workflow.fem's, so any stall
+    counts as a divergence here."""
+    for case in ds["case"].values:
+        d = ds.sel(case=case)
+        st = np.where(d["status"].values == 0, 0, np.where(d["status"].values == 3, 3, 1))
+        n = d.sizes["p_top_kpa"]
+        pb = np.full(n, float(d["p_bottom_kpa"]))
+        add(
+            name,
+            str(case),
+            d["p_top_kpa"].values,
+            pb,
+            st,
+            np.zeros(n, bool),
+            d["max_penetration_mm"].values,
+            np.zeros(n, int),
+        )
+
+
 def fe_samples(sources: Sequence[tuple[str, xr.Dataset]]) -> xr.Dataset:
     """Every FE sample of every method in one long table on ``sample``.
 
@@ -92,39 +112,12 @@ def fe_samples(sources: Sequence[tuple[str, xr.Dataset]]) -> xr.Dataset:
             for model in ds["model"].values:
                 h = float(ds.attrs["h_2d_mm"] if str(model) == "2d" else ds.attrs["h_3d_mm"])
                 name = method_name("unit check", str(model), h, bool(ds.attrs["contact"]))
-                for case in ds["case"].values:
-                    d = ds.sel(model=model, case=case)
-                    # the unit check's statuses are workflow.fem's: any stall is a divergence here
-                    st = np.where(d["status"].values == 0, 0, np.where(d["status"].values == 3, 3, 1))
-                    n = d.sizes["p_top_kpa"]
-                    add(
-                        name,
-                        str(case),
-                        d["p_top_kpa"].values,
-                        np.full(n, float(d["p_bottom_kpa"])),
-                        st,
-                        np.zeros(n, bool),
-                        d["max_penetration_mm"].values,
-                        np.zeros(n, int),
-                    )
+                _add_unit_cases(add, name, ds.sel(model=model))
         elif kind == "fem_case":  # one fidelity-study case (workflow.fidelity.entry_fem.write_fem_case)
             name = method_name(
                 "fidelity study", str(ds.attrs["model"]), float(ds.attrs["h_mm"]), bool(int(ds.attrs["contact"]))
             )
-            for case in ds["case"].values:
-                d = ds.sel(case=case)
-                st = np.where(d["status"].values == 0, 0, np.where(d["status"].values == 3, 3, 1))
-                n = d.sizes["p_top_kpa"]
-                add(
-                    name,
-                    str(case),
-                    d["p_top_kpa"].values,
-                    np.full(n, float(d["p_bottom_kpa"])),
-                    st,
-                    np.zeros(n, bool),
-                    d["max_penetration_mm"].values,
-                    np.zeros(n, int),
-                )
+            _add_unit_cases(add, name, ds)
         else:
             raise ValueError(f"unknown source kind {kind!r}")
     n = len(cols["method"])
