@@ -167,3 +167,83 @@ def test_a_slave_on_a_shared_master_node_keeps_its_force_on_either_facet():
         forces.append(pair._local_force(X, np.array([1.0]), lim)[0, :2])
     assert np.linalg.norm(forces[0]) > 0.01  # ~ eps g: the slave is 0.02 mm inside
     np.testing.assert_allclose(forces[0], forces[1], rtol=1e-6, atol=1e-9)
+
+
+def _block_corner():
+    """Master: the convex corner of a block occupying x < 0, y < 0 (wall x = 0, top face y = 0), outward normals."""
+    pts = np.array([[0.0, -2.0], [0.0, -1.0], [0.0, 0.0], [-1.0, 0.0], [-2.0, 0.0]])
+    return pts, np.array([[0, 1], [1, 2], [2, 3], [3, 4]])  # wall facets (normal +x), then top facets (+y)
+
+
+def test_contact_tangent_matches_finite_differences_for_a_slave_sliding_round_a_block_corner():
+    """The contact tangent, normal's rotation and projection's sliding included, on a slave that slides along the
+    wall, round the convex corner (interpolated nodal normals, the corner's on the bisector) and along the top face,
+    0.005 mm inside the block (past the 0.01 mm band, so the penalty is in its linear part)."""
+    pts, facets = _block_corner()
+    slave_facet = np.array([[6, 5]])
+    depth = 0.005
+    path = [(-depth, y) for y in np.linspace(-1.6, -0.05, 7)]  # along the wall
+    path += [(depth * np.cos(t), depth * np.sin(t)) for t in np.linspace(0.1, 1.4, 5)]  # round the corner, outside
+    path += [(x, -depth) for x in np.linspace(-0.05, -1.6, 7)]  # along the top face
+    checked = 0
+    for xs in path:
+        p = np.concatenate([pts, [xs, np.add(xs, [0.0, -0.3])]]).T
+        pair = ContactPair(p, slave_facet, facets, search=1.0, extend=0.0, smoothing=0.01)
+        x = p.copy()
+        dofs, f, K, gmin = pair.evaluate(x, 100.0)
+        slaves = dofs[:, 0] // 2 if dofs.size else []
+        if 5 not in list(slaves):
+            continue  # outside the corner the bisector projection may leave the slave out of reach of the band
+        n = x.size
+
+        def force(xx):
+            d, ff, _, _ = pair.evaluate(xx, 100.0, tangent=False)
+            return np.bincount(d.ravel(), weights=ff.ravel(), minlength=n)
+
+        rng = np.random.default_rng(3)
+        for _ in range(3):
+            du = rng.normal(size=x.shape) * 1e-7
+            fd = (force(x + du) - force(x - du)) / 2
+            du_flat = du.T.ravel()
+            Kdu = np.zeros(n)
+            np.add.at(Kdu, dofs, np.einsum("cij,cj->ci", K, du_flat[dofs]))
+            assert np.linalg.norm(fd - Kdu) < 1e-4 * np.linalg.norm(Kdu), xs
+        checked += 1
+    assert checked >= 14  # the wall, the corner and the top face were all in contact
+
+
+def test_newton_converges_quadratically_on_a_contact_step_whose_active_set_does_not_change(pressed_unit):
+    """From the converged 150 kPa state (walls pressed together), 150 -> 152 kPa: the same slaves stay in contact on
+    the same facets at every iterate, and once in its asymptotic range the residual falls quadratically,
+    r_k+1 / r_0 <= 10 (r_k / r_0)^2, down to 1e-8 r_0 within eight iterations (a tangent without the normal's
+    rotation or the projection's sliding contracts linearly here)."""
+    from workflow.fem import _solve
+
+    um, model, _ = pressed_unit
+    start = _solve.solve_path(model, um.mesh.p)
+    assert start.status == 0
+    nxt = fem.unit_model(um, 152.0, 0.0, "free", True)
+    norms, active = [], []
+    evaluate = nxt.evaluate
+
+    def recording(u, lam, p_ref, tangent=True):
+        r, K, info = evaluate(u, lam, p_ref, tangent)
+        if tangent and r is not None:
+            rr = nxt.T.T @ r
+            norms.append(float(np.sqrt(rr @ rr + info["r_internal"] @ info["r_internal"])))
+            pair = nxt.contacts[0]
+            m, _, _, g, inside = pair._project(nxt.positions(u, p_ref))
+            act = inside & (g < pair.smoothing)
+            active.append(frozenset(zip(pair.slave[act].tolist(), m[act].tolist())))
+        return r, K, info
+
+    nxt.evaluate = recording
+    opts = dict(_solve.DEFAULT_SOLVER, rtol=1e-9, atol=1e-14, max_iter=8, line_search=False)
+    ok, *_ = _solve._newton(nxt, start.state, 1.0, um.mesh.p, opts)
+    assert ok
+    assert len(active[0]) > 4 and all(a == active[0] for a in active)
+    r = np.array(norms) / norms[0]
+    assert r[-1] < 1e-8
+    # the last contraction before convergence (above round-off) is quadratic
+    k = int(np.flatnonzero(r > 1e-7)[-1])
+    assert r[k + 1] <= 10.0 * r[k] ** 2, r
