@@ -20,6 +20,7 @@ PATIENTS = sorted(config["patients"])
 
 wildcard_constraints:
     patient="|".join(PATIENTS) if PATIENTS else "NONE",
+    exercise="|".join(config["exercises"]),
 
 
 def cfg(*keys):
@@ -214,6 +215,13 @@ def get_validation_plans(wildcards):
 def get_fea_exercises():
     """The exercises the FEA check runs (config fea_check.exercises, else all)."""
     return list(config["fea_check"]["exercises"] or config["exercises"])
+
+
+def get_standalone_parts(wildcards):
+    """Input function: one stand-alone result per exercise of the study (fea_check.standalone.exercises, else the
+    check's)."""
+    exercises = config["fea_check"].get("standalone", {}).get("exercises") or get_fea_exercises()
+    return expand("results/patients/{patient}/standalone/{exercise}.nc", patient=wildcards.patient, exercise=exercises)
 
 
 def get_fea_surrogates(wildcards):

@@ -5,6 +5,7 @@
 #   get_fea_exercises()      -> the exercises checked (config fea_check.exercises or all)
 #   get_fea_surrogates()     -> {"surrogate_2d": ..., "surrogate_3d": ...}
 #   get_fea_check_slice(wc)  -> the config a patient's check depends on
+#   get_standalone_parts(wc) -> the stand-alone exercises solved apart (one job each: two 3D solves run at once)
 
 
 rule fea_check:
@@ -44,10 +45,31 @@ rule fea_check:
         "../workflow/scripts/fea_check.py"
 
 
-rule standalone_actuator:
+rule standalone_exercise:
     input:
         unpack(get_fea_surrogates),
         plan="results/patients/{patient}/cascade_plan.nc",
+        code=code_files("scripts.standalone_exercise"),
+    output:
+        nc="results/patients/{patient}/standalone/{exercise}.nc",
+    log:
+        "logs/fea_check/standalone_exercise/{patient}_{exercise}.log",
+    benchmark:
+        "results/benchmarks/rules/standalone_exercise_{patient}_{exercise}.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        fea_check=config["fea_check"],
+        actuator=config["actuator"],
+        cascade=config["cascade"],
+        config_slice=get_fea_check_slice,
+    script:
+        "../workflow/scripts/standalone_exercise.py"
+
+
+rule standalone_actuator:
+    input:
+        parts=get_standalone_parts,
         code=code_files("scripts.standalone_actuator"),
     output:
         nc="results/patients/{patient}/standalone_actuator.nc",
@@ -64,9 +86,6 @@ rule standalone_actuator:
     conda:
         "../envs/project.yaml"
     params:
-        fea_check=config["fea_check"],
-        actuator=config["actuator"],
-        cascade=config["cascade"],
         config_slice=get_fea_check_slice,
     script:
         "../workflow/scripts/standalone_actuator.py"

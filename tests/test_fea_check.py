@@ -399,6 +399,60 @@ def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
     assert float(row["h_used_mm"]) == 3.0 and bool(row["converged"]) and float(row["wall_time_s"]) == 2.0
 
 
+def test_standalone_exercises_solved_apart_merge_into_the_dataset_solved_together(monkeypatch, tmp_path):
+    """The workflow solves each exercise's stand-alone models in a job of its own; joined, they are the dataset of
+    one solve over all exercises, model comparisons included, through a netCDF round trip."""
+    from types import SimpleNamespace
+
+    import xarray as xr
+
+    from workflow.common.provenance import open_result, write_dataset
+    from workflow.fea_check import standalone as FS
+
+    def fake_solve(um, press, **kw):  # tip angle and shape from the pressures, so exercises and models differ
+        bend = sum(t - b for t, b in press.values()) / (100.0 * um.dim)
+        s = np.linspace(0, um.length, 7)
+        curve = np.column_stack([s, bend * s**2 / um.length] + ([np.zeros(7)] if um.dim == 3 else []))
+        return SimpleNamespace(
+            status=0,
+            load_factor=1.0,
+            tip_angle_deg=10.0 * bend,
+            backbone_mm=curve,
+            backbone_ref_mm=np.column_stack([s, np.zeros(7)] + ([np.zeros(7)] if um.dim == 3 else [])),
+            newton_iterations=5,
+            wall_time_s=1.0,
+            ndofs=int(um.mesh.p.size),
+            max_penetration_mm=0.01,
+            overlap_depth_mm=0.0,
+            min_pocket=30.0,
+        )
+
+    monkeypatch.setattr(FS, "solve_standalone", fake_solve)
+    exercises = ["TGE1", "TGE2"]
+    p_plan = np.zeros((2, 4, 2))
+    p_plan[0, :, 1] = 120.0
+    p_plan[1, :2, 0] = 250.0
+    plan = xr.Dataset(
+        {"pressure_kpa": (("exercise", "group", "chamber"), p_plan), "units_per_group": ("group", np.ones(4, int))},
+        coords={"exercise": exercises, "group": ["CMC", "MCP", "PIP", "DIP"], "chamber": ["top", "bottom"]},
+    )
+    kw = dict(models=list(FS.MODELS), actuator_cfg={}, h_2d_mm=2.0, h_3d_mm=[4.0], solver={})
+    together = FS.standalone_dataset(plan, exercises=exercises, p2=0.3 * p_plan, flag=np.zeros((2, 4), int), **kw)
+    parts = []
+    for i, ex in enumerate(exercises):
+        part = FS.standalone_dataset(plan, exercises=[ex], p2=0.3 * p_plan[[i]], flag=np.zeros((1, 4), int), **kw)
+        write_dataset(part, tmp_path / f"{ex}.nc", rule="test", config_slice={}, title=ex)
+        parts.append(open_result(tmp_path / f"{ex}.nc"))
+    merged = FS.merge_exercises(parts)
+    assert list(merged["exercise"].values) == exercises
+    assert set(merged.data_vars) == set(together.data_vars) and "profile_rms_mm" in merged
+    for name in together.data_vars:
+        np.testing.assert_allclose(merged[name].values.astype(float), together[name].values.astype(float), err_msg=name)
+    assert float(merged["tip_angle_diff_deg"].sel(exercise="TGE2")) != 0.0
+    with pytest.raises(ValueError, match="model"):
+        FS.merge_exercises([parts[0], parts[1].isel(model=[0, 1])])
+
+
 def test_a_stalled_whole_actuator_solve_is_retried_with_the_restarts_over_each_other(monkeypatch):
     """The gravity or exercise solve that stalls is solved again from the same start, each restart applied over
     the previous ones; the first full solve wins, else the one that got furthest."""

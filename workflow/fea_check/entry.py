@@ -1,4 +1,4 @@
-"""Rule entry points of the FEA check (``fea_check``, ``standalone_actuator``):
+"""Rule entry point of the FEA check (``fea_check``; the stand-alone actuators are :mod:`.entry_standalone`):
 read the plan and the patient's inputs, build the FE model, run the check, write
 the dataset, the deformed meshes (.vtu) and the poses plot.
 """
@@ -14,31 +14,21 @@ import numpy as np
 import xarray as xr
 
 from workflow.actuator.pressure_limit import material_limit
-from workflow.actuator.surrogates import load_surrogate
 from workflow.actuator.unit_model import load_unit_model
 from workflow.cascade.finger import Finger
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
-from workflow.common.constants import CHAMBERS, GROUPS, JOINTS
+from workflow.common.constants import JOINTS
 from workflow.common.provenance import open_result, write_dataset
 from workflow.common.vtu import write_vtu
-from workflow.fea_check.check import applied_limit, pressures_2d
+from workflow.fea_check.check import applied_limit
+from workflow.fea_check.entry_standalone import load_surrogate_angles
 from workflow.fea_check.model import build_patient_fea
-from workflow.fea_check.plots import plot_fea_poses, plot_standalone
+from workflow.fea_check.plots import plot_fea_poses
 from workflow.fea_check.run import run_fea_check
-from workflow.fea_check.standalone import MODELS, standalone_dataset
 
-__all__ = ["PatientSetup", "load_patient_setup", "load_surrogate_angles", "write_fea_check", "write_standalone"]
+__all__ = ["PatientSetup", "load_patient_setup", "load_surrogate_angles", "write_fea_check"]
 
 log = logging.getLogger(__name__)
-
-
-def load_surrogate_angles(surrogate_2d: str | None, surrogate_3d: str | None):
-    """(angle_3d, angle_2d, p_max_2d, p_max_3d) from the fitted surrogates, or Nones when not given."""
-    if not surrogate_2d or not surrogate_3d:
-        return None, None, np.inf, np.inf
-
-    s2, s3 = load_surrogate(surrogate_2d), load_surrogate(surrogate_3d)
-    return s3.angle_deg, s2.angle_deg, float(s2.p_max_kpa), float(s3.p_max_kpa)
 
 
 @dataclass
@@ -210,54 +200,4 @@ def write_fea_check(
             title=f"patient {patient_name}",
             corrected_states=corrected,
         )
-    return ds
-
-
-def write_standalone(
-    patient_name: str,
-    *,
-    plan_nc: str,
-    out_nc: str,
-    out_png: str | None,
-    fea_cfg: Mapping,
-    actuator_cfg: Mapping,
-    cascade_cfg: Mapping,
-    config_slice: Any,
-    surrogate_2d: str | None = None,
-    surrogate_3d: str | None = None,
-    rule: str = "standalone_actuator",
-) -> xr.Dataset:
-    """The rule's entry point (see the module docstring)."""
-
-    plan = open_result(plan_nc)
-    sa = dict(fea_cfg.get("standalone", {}))
-    ex = list(sa.get("exercises") or fea_cfg.get("exercises") or [str(e) for e in plan["exercise"].values])
-    models = list(sa.get("models", MODELS))
-    use_map = bool(fea_cfg.get("map_pressures", True)) and cascade_cfg.get("surrogate", "3d") == "3d"
-    a3, a2, pm2, pm3 = load_surrogate_angles(surrogate_2d, surrogate_3d) if use_map else (None, None, np.inf, np.inf)
-    p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
-    p2, flag = pressures_2d(p_plan, a3, a2, p_max_2d_kpa=pm2, p_max_3d_kpa=pm3, limit=applied_limit(actuator_cfg, pm2))
-    solver = dict(actuator_cfg.get("solver", {}))
-    solver.update(dict(fea_cfg.get("solver", {})))
-    ds = standalone_dataset(
-        plan,
-        exercises=ex,
-        models=models,
-        actuator_cfg=actuator_cfg,
-        h_2d_mm=float(fea_cfg.get("h_actuator_mm", 2.0)),
-        h_3d_mm=sa.get("h_3d_mm", [4.0, 3.0]),
-        solver=solver,
-        p2=p2,
-        flag=flag,
-    )
-    ds.attrs["patient"] = patient_name
-    write_dataset(
-        ds,
-        out_nc,
-        rule=rule,
-        config_slice=config_slice,
-        title=f"Stand-alone whole actuators at the plan's pressures, patient {patient_name}",
-    )
-    if out_png:
-        plot_standalone(ds, out_png, title=f"patient {patient_name}")
     return ds

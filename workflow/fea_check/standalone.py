@@ -14,6 +14,8 @@ no gravity, each exercise's pressures ramped from zero, in up to three models:
 Compared by the backbone curve (paper-layer mid-line, resampled at common
 stations along the undeformed actuator) and the tip angle.  A model that does
 not reach the full pressures is kept with its last converged load factor.
+The workflow solves each exercise in a job of its own (the 3D solves take
+minutes each, so two run at once) and joins them with :func:`merge_exercises`.
 Lengths mm, angles deg, pressures kPa.
 """
 
@@ -31,7 +33,7 @@ from workflow.common.runlog import solved
 from workflow.fem._mesh import build_actuator_mesh
 from workflow.fem.actuator import solve_standalone
 
-__all__ = ["MODELS", "resample_backbone", "standalone_dataset"]
+__all__ = ["MODELS", "compare_models", "merge_exercises", "resample_backbone", "standalone_dataset"]
 
 log = logging.getLogger(__name__)
 MODELS = ("2d_mapped", "2d_plan", "3d_plan")
@@ -222,6 +224,18 @@ def standalone_dataset(
         },
     )
     ds["station"].attrs = {"units": "mm", "long_name": "position along the undeformed backbone from the hand end"}
+    ds.attrs.update({"h_2d_mm": float(h_2d_mm), "h_3d_mm_tried": str(h3_list), "units_per_group": str(upg)})
+    return compare_models(ds)
+
+
+#: Variables that compare two models of one exercise (recomputed when exercises are joined).
+_COMPARISONS = ("profile_rms_mm", "tip_angle_diff_deg")
+
+
+def compare_models(ds: xr.Dataset) -> xr.Dataset:
+    """Add the mapped 2D model against the 3D one, per exercise: RMS distance of the backbones, tip angle difference."""
+    ds = ds.drop_vars([v for v in _COMPARISONS if v in ds])
+    models = list(ds["model"].values)
     if "2d_mapped" in models and "3d_plan" in models:
         d = np.hypot(
             ds["backbone_x_mm"].sel(model="2d_mapped") - ds["backbone_x_mm"].sel(model="3d_plan"),
@@ -237,5 +251,21 @@ def standalone_dataset(
             (ds["tip_angle_deg"].sel(model="2d_mapped") - ds["tip_angle_deg"].sel(model="3d_plan")).values,
             {"units": "degree", "long_name": "tip angle 2d_mapped minus 3d_plan"},
         )
-    ds.attrs.update({"h_2d_mm": float(h_2d_mm), "h_3d_mm_tried": str(h3_list), "units_per_group": str(upg)})
     return ds
+
+
+def merge_exercises(parts: Sequence[xr.Dataset]) -> xr.Dataset:
+    """One dataset of the exercises solved apart (each part from :func:`standalone_dataset` on one or more).
+
+    The parts must share the actuator, the models and the stations; the exercises keep the parts' order.
+    """
+    if not parts:
+        raise ValueError("no stand-alone results to merge")
+    first = parts[0]
+    for part in parts[1:]:
+        for coord in ("model", "station", "group", "chamber"):
+            if not np.array_equal(part[coord].values, first[coord].values):
+                raise ValueError(f"stand-alone parts differ in {coord!r}: solved on different settings")
+    stripped = [part.drop_vars([v for v in _COMPARISONS if v in part]) for part in parts]
+    ds = xr.concat(stripped, dim="exercise", combine_attrs="override")
+    return compare_models(ds)

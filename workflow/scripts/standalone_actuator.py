@@ -1,20 +1,12 @@
-from workflow.fea_check.entry import write_standalone
+from workflow.fea_check.entry_standalone import write_standalone
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821
-p = snakemake.params  # noqa: F821
-i = snakemake.input  # noqa: F821
-o = snakemake.output  # noqa: F821
 write_standalone(
-    snakemake.wildcards.patient,
-    plan_nc=i.plan,
-    out_nc=o.nc,
-    out_png=o.plot,  # noqa: F821
-    fea_cfg=p.fea_check,
-    actuator_cfg=p.actuator,
-    cascade_cfg=p.cascade,
-    config_slice=p.config_slice,
-    surrogate_2d=i.get("surrogate_2d"),
-    surrogate_3d=i.get("surrogate_3d"),
-    rule=snakemake.rule,
-)  # noqa: F821
+    snakemake.wildcards.patient,  # noqa: F821
+    part_ncs=list(snakemake.input.parts),  # noqa: F821
+    out_nc=snakemake.output.nc,  # noqa: F821
+    out_png=snakemake.output.plot,  # noqa: F821
+    config_slice=snakemake.params.config_slice,  # noqa: F821
+    rule=snakemake.rule,  # noqa: F821
+)
