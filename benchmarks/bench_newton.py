@@ -1,0 +1,132 @@
+"""Newton with contact against its targets, and what the convergence tolerance buys.  Not a test: a table.
+
+Cases (P_B = 0, contact on, the workflow's element technology and solver unless said):
+
+* the 2D unit at h = 1 mm (the sweeps' mesh), free and blocked, 0 -> 300 kPa, with the stops at 60 and
+  180 kPa the unit check uses: load steps, cut-backs, Newton iterations (accepted steps and all attempts),
+  median iterations per accepted step, wall time;
+* the same rays at residual tolerances rtol = 1e-8, 1e-6 (default), 1e-4 and 3e-2 (the paper's 0.03 in MSC Marc,
+  there on residual and displacement): whether the ray reaches 300 kPa, the free angle and blocked moment at
+  60 / 180 / 300 kPa and their change against rtol = 1e-8;
+* the 3D unit at h = 2 mm (the 3D sweeps' mesh), free, one ray to 300 kPa (``--no-3d`` leaves it out).
+
+Each case runs in its own process with one BLAS / MKL thread.  Results: ``benchmarks/out/bench_newton.{json,md}``.
+
+    python benchmarks/bench_newton.py [--no-3d]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "benchmarks" / "out"
+sys.path.insert(0, str(ROOT))
+STOPS = (0.2, 0.6)  # 60 and 180 kPa on the 300 kPa ray
+TOLERANCES = (1e-8, 1e-6, 1e-4, 3e-2)
+
+#: Targets of the Newton work, and what each row of the table measures.
+TARGETS = {
+    "median_iterations": "median Newton iterations per converged step with contact <= 5",
+    "steps_2d": "2D unit to 300 kPa in <= 20 load steps without cut-backs",
+    "time_3d": "3D unit per ray at the mesh the FE study picks <= 2 min",
+}
+
+
+def _case(dim: int, h: float, case: str, solver: dict, queue) -> None:
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"
+    from workflow import fem
+    from workflow.fem import _linsolve
+
+    t0 = time.perf_counter()
+    res = fem.solve_unit({"dim": dim, "h": h}, 300.0, 0.0, case=case, contact=True, solver=solver, stops=STOPS)
+    wall = time.perf_counter() - t0
+    key = "bending_angle_deg" if case == "free" else "bending_moment_nm"
+    at = {round(300.0 * hh["lam"]): hh[key] for hh in res.history if any(abs(hh["lam"] - s) < 1e-9 for s in STOPS)}
+    if res.status == 0:
+        at[300] = getattr(res, key)
+    its = [int(hh["iterations"]) for hh in res.history]
+    queue.put(
+        {
+            "dim": dim,
+            "h_mm": h,
+            "case": case,
+            "rtol": solver.get("rtol", fem.DEFAULT_SOLVER["rtol"]),
+            "status": int(res.status),
+            "load_factor": float(res.load_factor),
+            "steps": len(res.history),
+            "cutbacks": int(res.cutbacks),
+            "iterations_accepted": int(sum(its)),
+            "iterations_all": int(res.newton_iterations),
+            "median_iterations": float(np.median(its)) if its else float("nan"),
+            "wall_s": round(wall, 2),
+            "value_at_kpa": {str(k): float(v) for k, v in sorted(at.items())},
+            "quantity": key,
+            "linear_solver": _linsolve.default_solver.backend,
+        }
+    )
+
+
+def run_case(dim: int, h: float, case: str, solver: dict | None = None) -> dict:
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    proc = ctx.Process(target=_case, args=(dim, h, case, dict(solver or {}), q))
+    proc.start()
+    out = q.get()
+    proc.join()
+    print(json.dumps(out), flush=True)
+    return out
+
+
+def _markdown(rows: list[dict]) -> str:
+    lines = ["| case | rtol | reached | steps | cut-backs | iterations (all attempts) | median it./step | wall s |"]
+    lines.append("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        lines.append(
+            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | {r['rtol']:g} | {100 * r['load_factor']:.0f} % | "
+            f"{r['steps']} | {r['cutbacks']} | {r['iterations_accepted']} ({r['iterations_all']}) | "
+            f"{r['median_iterations']:g} | {r['wall_s']:.1f} |"
+        )
+    lines += ["", "Tolerance study (2D h = 1 mm): value and change against rtol = 1e-8", ""]
+    lines.append("| case | rtol | 60 kPa | 180 kPa | 300 kPa |")
+    lines.append("|---|---|---|---|---|")
+    ref = {r["case"]: r["value_at_kpa"] for r in rows if r["dim"] == 2 and r["rtol"] == TOLERANCES[0]}
+    for r in rows:
+        if r["dim"] != 2 or r["case"] not in ref:
+            continue
+        cells = []
+        for p in ("60", "180", "300"):
+            v, v0 = r["value_at_kpa"].get(p), ref[r["case"]].get(p)
+            cells.append("stopped" if v is None else f"{v:.6g} ({100 * (v - v0) / abs(v0):+.3f} %)")
+        lines.append(f"| {r['case']} | {r['rtol']:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--no-3d", action="store_true", help="leave out the 3D ray")
+    args = ap.parse_args(argv)
+    rows = []
+    for case in ("free", "blocked"):
+        for rtol in TOLERANCES:
+            rows.append(run_case(2, 1.0, case, {"rtol": rtol}))
+    if not args.no_3d:
+        rows.append(run_case(3, 2.0, "free", {}))
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "bench_newton.json").write_text(json.dumps({"targets": TARGETS, "rows": rows}, indent=2))
+    (OUT / "bench_newton.md").write_text(_markdown(rows))
+    print(_markdown(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
