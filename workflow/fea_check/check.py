@@ -35,11 +35,10 @@ what the chain's kinematics miss (all units of a span bending alike, no
 contact geometry).
 
 Correction step (``correction.max_iterations`` > 0).  For an exercise the
-FEA misses, the plan is re-made with the FEA's angles: the reduced-order
-chain is asked for ``target - (FEA - chain)`` at the current pressures, the
-new pressures are mapped to 2D and checked again, at most
-``max_iterations`` times; it stops early when the re-plan changes no pressure
-by ``min_change_kpa`` (the spans sit at their pressure limit, say).  The best
+FEA misses, a bounded quasi-Newton inverse on the FEA (:mod:`.correction`):
+the chain's Jacobian as the first estimate, Broyden's update from each FEA
+solve, at most ``max_iterations`` solves; it stops early when the bounds block
+progress (a step changes no pressure by ``min_change_kpa``).  The best
 check (fewest joints out of tolerance, then the least total error) is kept
 as ``corrected_*``; every iteration's pressures and angles are stored.
 """

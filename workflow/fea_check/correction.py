@@ -1,6 +1,11 @@
 """The correction step of the FEA check: when the FEA misses an exercise's
-target, re-plan on a reduced-order chain whose unit response is scaled to what
-the FEA did, and check again, never beyond the pressure limit.
+target, a bounded quasi-Newton inverse on the FEA itself (:mod:`.inverse`):
+the reduced-order chain's Jacobian at the plan as the first estimate, Broyden's
+update from every FEA solve, the pressures within zero and the plan's limit,
+P_CMC tied to P_MCP where the plan ties them, least pressure in the directions
+the three angles leave free.  It stops at the tolerance, at the budget of FEA
+solves, or where the bounds block progress (naming the chambers).  An exercise
+counts as reached only when the FEA reaches it.
 
 Pressures kPa, angles deg.
 """
@@ -14,11 +19,10 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import xarray as xr
 
-from workflow.cascade.model import SPANS, CascadeModel, pressures_table
-from workflow.cascade.planning import plan_exercise
-from workflow.common.constants import GROUPS, JOINTS
+from workflow.cascade.model import CascadeModel, pressures_table, pressures_vector, solve_equilibrium
 from workflow.common.runlog import solved
 from workflow.fea_check.check import ExerciseCheck, check_exercise, outcome
+from workflow.fea_check.inverse import bounded_broyden, tie_matrix
 from workflow.fea_check.model import PatientFEA
 from workflow.fem.coupled import CoupledResult
 
@@ -44,20 +48,18 @@ class Correction:
         return len(self.checks) - 1
 
 
-def _saturated_joints(angle_deg, target_deg, tolerance_deg, p_now, p_new, p_max) -> list[str]:
-    """Joints off target whose driving chambers (top to flex, bottom to extend, over the joint's span) sit at
-    ``p_max`` now and in the re-plan: more of the same pressure is not available."""
-
-    out = []
-    for j, joint in enumerate(JOINTS):
-        miss = float(target_deg[j] - angle_deg[j])
-        if abs(miss) <= tolerance_deg:
+def chain_jacobian(ro: CascadeModel, p8: np.ndarray, p_max: float, step_kpa: float = 5.0) -> np.ndarray:
+    """d(joint angles)/d(pressures) (3, 8; deg/kPa) of the reduced-order chain at ``p8``, by central differences
+    (one-sided at a bound)."""
+    J = np.zeros((3, 8))
+    for i in range(8):
+        lo, hi = max(p8[i] - step_kpa, 0.0), min(p8[i] + step_kpa, p_max)
+        if hi <= lo:
             continue
-        c = 0 if miss > 0 else 1
-        rows = [GROUPS.index(g) for g in SPANS[joint]]
-        if all(min(p_now[r, c], p_new[r, c]) >= p_max * (1 - 1e-6) for r in rows):
-            out.append(joint)
-    return out
+        a, b = p8.copy(), p8.copy()
+        a[i], b[i] = lo, hi
+        J[:, i] = (solve_equilibrium(ro, b).joint_angles_deg - solve_equilibrium(ro, a).joint_angles_deg) / (hi - lo)
+    return J
 
 
 def correct_exercise(
@@ -78,12 +80,14 @@ def correct_exercise(
     max_iterations: int,
     min_change_kpa: float = 1.0,
 ) -> Correction:
-    """Re-plan with the FEA's angles until the FEA reaches the target (see the module docstring).
+    """The bounded quasi-Newton inverse on the FEA from the plan's check (see the module docstring).
 
     ``ro``: the reduced-order chain the plan was made with; ``p_plan`` (4, 2)
     its pressures (kPa) and ``predicted_deg`` its angles there; ``first`` the
     FEA check of the plan; ``to_2d``: (4, 2) planned -> (4, 2) applied 2D
-    pressures; ``plan_opts``: keywords of :func:`workflow.cascade.plan_exercise`.
+    pressures; ``plan_opts``: keywords of :func:`workflow.cascade.plan_exercise` (its ``p_max_kpa`` and
+    ``tie_cmc_mcp`` bound and tie the pressures); ``max_iterations``: FEA solves at most; ``min_change_kpa``: a
+    step that changes no pressure by this much means the bounds block progress.
     """
 
     target = np.asarray(target_deg, float)
@@ -95,53 +99,58 @@ def correct_exercise(
         0,
         "",
     )
-    ok, best_score, _ = outcome(first, target, tolerance_deg, limits_nm)
-    if ok:
+    if outcome(first, target, tolerance_deg, limits_nm)[0]:
         cor.stop_reason = "reached by the plan"
         return cor
-    p_max = float(plan_opts.get("p_max_kpa", np.inf))
-    for k in range(1, int(max_iterations) + 1):
-        offset = cor.checks[-1].angle_deg - cor.predicted_deg[-1]
-        new = plan_exercise(ro, target - offset, exercise=name, **plan_opts)
-        p3 = pressures_table(new.pressures_kpa)
-        stuck = _saturated_joints(cor.checks[-1].angle_deg, target, tolerance_deg, cor.pressures_kpa[-1], p3, p_max)
-        if stuck:
-            cor.stop_reason = (
-                f"{', '.join(stuck)} short of target with the chambers that would move "
-                f"{'it' if len(stuck) == 1 else 'them'} at the {p_max:g} kPa limit: no re-plan can reach it"
-            )
-            break
-        if np.max(np.abs(p3 - cor.pressures_kpa[-1])) < min_change_kpa:
-            cor.stop_reason = f"re-plan {k} changes no pressure by {min_change_kpa:g} kPa" + (
-                f" ({new.reason})" if new.reason else ""
-            )
-            break
+    p_max = float(plan_opts.get("p_max_kpa", 300.0))
+    p8 = pressures_vector(np.asarray(p_plan, float).ravel())
+
+    def forward(p: np.ndarray):
+        p3 = pressures_table(p)
         p2 = to_2d(p3)
         chk = check_exercise(fea, name, p2, solver, gravity=gravity)
         cor.pressures_kpa.append(p3)
         cor.pressures_2d_kpa.append(p2)
         cor.checks.append(chk)
-        cor.predicted_deg.append(new.equilibrium.joint_angles_deg)
-        ok, score, _ = outcome(chk, target, tolerance_deg, limits_nm)
+        cor.predicted_deg.append(solve_equilibrium(ro, p).joint_angles_deg)
+        ok = chk.result.status == 0
         log.info(
-            "%s correction %d: plan %s kPa (2D %s) -> FEA %s deg (target %s), status %d, %s",
+            "%s correction %d: plan %s kPa (2D %s) -> FEA %s deg (target %s), status %d",
             name,
-            k,
+            len(cor.checks) - 1,
             np.round(p3.ravel(), 1),
-            np.round(p2.ravel(), 1),
+            np.round(np.asarray(p2).ravel(), 1),
             np.round(chk.angle_deg, 1),
             target,
             chk.result.status,
-            "reached" if ok else "not reached",
-            extra=solved(chk.result.status != 0),
+            extra=solved(not ok),
         )
-        if score < best_score:
-            cor.best, best_score = k, score
-        if ok:
-            cor.stop_reason = f"reached after {k} correction(s)"
-            break
-    else:
-        cor.stop_reason = cor.stop_reason or f"not reached in {int(max_iterations)} correction(s)"
+        return chk.angle_deg, ok
+
+    tie = tie_matrix(8, [(0, 2), (1, 3)]) if plan_opts.get("tie_cmc_mcp", True) else None
+    inv = bounded_broyden(
+        forward,
+        p8,
+        first.angle_deg,
+        first.result.status == 0,
+        target,
+        chain_jacobian(ro, p8, p_max),
+        lo=0.0,
+        hi=p_max,
+        tol=float(tolerance_deg),
+        budget=int(max_iterations),
+        E=tie,
+        min_step_kpa=float(min_change_kpa),
+    )
+    # the kept iterate: fewest joints off target with the safety limits held, then least error
+    scores = [outcome(c, target, tolerance_deg, limits_nm)[1] for c in cor.checks]  # a stalled solve scores +3
+    cor.best = min(range(len(scores)), key=scores.__getitem__)
+    reached = outcome(cor.checks[cor.best], target, tolerance_deg, limits_nm)[0]
+    cor.stop_reason = (
+        f"reached after {cor.iterations} correction(s)"
+        if reached
+        else inv.reason + (" (angles within tolerance, a safety limit exceeded)" if inv.reached else "")
+    )
     return cor
 
 
