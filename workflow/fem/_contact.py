@@ -101,36 +101,20 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
-def _segment_2d(
-    X: np.ndarray,
-    has_prev: np.ndarray,
-    has_next: np.ndarray,
-    corner_a: np.ndarray | None = None,
-    corner_b: np.ndarray | None = None,
-):
-    """Projection of slaves onto master segments along the interpolated normal, with vertex regions at corners.
+def _segment_2d(X: np.ndarray, has_prev: np.ndarray, has_next: np.ndarray):
+    """Projection of slaves onto master segments along the interpolated normal.
 
     X (k, 5, 2) = slave, a, b, node before a, node after b (mm).  Nodal normals:
     n_a = mean of the facet normals at a (the facet's own at a free edge), same
     for b.  xi solves (x_s - x_a - xi t) x ((1 - xi) n_a + xi n_b) = 0, the
     root near the straight projection; past a free edge the normal stays the
-    edge normal.  At a convex corner of the master (``corner_a`` / ``corner_b``,
-    e.g. a block's outer corner) the normal is not averaged: the facet keeps its
-    own normal up to the corner node, and a slave beyond it (in the corner's
-    vertex region) measures its gap to the node itself, along the line between
-    them (xi clipped to the end).  The gap is then the distance to the corner,
-    continuous with a continuous gradient round it, where a normal averaged to
-    the bisector on straight facets gives it a kink (measured: dg/dy -1.4 on one
-    facet, +0.1 on the next, for a corner sliding past a corner).  Returns xi
-    (k,), unit normal n(xi) (k, 2), gap g (k,) in mm.
+    edge normal.  Returns xi (k,), unit normal n(xi) (k, 2), gap g (k,) in mm.
     """
     xs, xa, xb, xp, xq = (X[:, i] for i in range(5))
-    ca = np.zeros(xs.shape[0], bool) if corner_a is None else corner_a
-    cb = np.zeros(xs.shape[0], bool) if corner_b is None else corner_b
     t = xb - xa
     nf = _normal_2d(t)
-    na = np.where((has_prev & ~ca)[:, None], _unit(_normal_2d(xa - xp) + nf), nf)
-    nb = np.where((has_next & ~cb)[:, None], _unit(_normal_2d(xq - xb) + nf), nf)
+    na = np.where(has_prev[:, None], _unit(_normal_2d(xa - xp) + nf), nf)
+    nb = np.where(has_next[:, None], _unit(_normal_2d(xq - xb) + nf), nf)
     d0, dn = xs - xa, nb - na
     A, B, C = -_cross(t, dn), _cross(d0, dn) - _cross(t, na), _cross(d0, na)
     disc = np.sqrt(np.maximum(B * B - 4.0 * A * C, 0.0))
@@ -143,36 +127,7 @@ def _segment_2d(
     n = na + xn[:, None] * dn
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     g = np.einsum("ki,ki->k", d0 - xi[:, None] * t, n)
-    # vertex regions of convex corners: the gap to the corner node (signed by the corner's bisector)
-    for corner, end, x_end, x_nb, at in ((ca, xi < 0, xa, xp, 0.0), (cb, xi > 1, xb, xq, 1.0)):
-        v = corner & end
-        if not v.any():
-            continue
-        d = xs - x_end
-        dist = np.linalg.norm(d, axis=1)
-        other = _normal_2d(x_end - x_nb) if at == 0.0 else _normal_2d(x_nb - x_end)
-        sign = np.where(np.einsum("ki,ki->k", d, _unit(other + nf)) < 0, -1.0, 1.0)
-        nv = sign[:, None] * d / np.maximum(dist, 1e-300)[:, None]
-        n = np.where(v[:, None], np.where((dist > 1e-12)[:, None], nv, nf), n)
-        g = np.where(v, sign * dist, g)
-        xi = np.where(v, at, xi)
     return xi, n, g
-
-
-def _convex_corners(p, facets, prev, nxt, corner_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per facet, whether its start / end node is a convex corner of the master (reference configuration).
-
-    Convex: the chain turns towards the solid (left of an outward-oriented chain) by more than ``corner_deg``.
-    """
-    xa, xb = p[:, facets[:, 0]].T, p[:, facets[:, 1]].T
-
-    def turn(t1, t2):
-        c = np.einsum("ki,ki->k", t1, t2) / (np.linalg.norm(t1, axis=1) * np.linalg.norm(t2, axis=1))
-        return (_cross(t1, t2) > 0) & (np.degrees(np.arccos(np.clip(c, -1.0, 1.0))) > corner_deg)
-
-    ca = (prev >= 0) & turn(xa - p[:, np.maximum(prev, 0)].T, xb - xa)
-    cb = (nxt >= 0) & turn(xb - xa, p[:, np.maximum(nxt, 0)].T - xb)
-    return ca, cb
 
 
 def _excluded(facets: np.ndarray, nodes: np.ndarray, parts: np.ndarray | None = None) -> list[set]:
@@ -251,7 +206,6 @@ class ContactPair:
         smoothing: float = 0.0,
         smooth_normals: bool = True,
         penalty_factor: float = 1.0,
-        corner_deg: float = 30.0,
     ):
         slaves = slave_facets if isinstance(slave_facets, (list, tuple)) else [slave_facets]
         masters = master_facets if isinstance(master_facets, (list, tuple)) else [master_facets]
@@ -271,7 +225,6 @@ class ContactPair:
             smoothing,
             smooth_normals,
             penalty_factor,
-            corner_deg=corner_deg,
         )
 
     @classmethod
@@ -285,7 +238,6 @@ class ContactPair:
         smooth_normals: bool = True,
         penalty_factor: float = 1.0,
         parts=None,
-        corner_deg: float = 30.0,
     ) -> "ContactPair":
         """Self-contact of each surface (list of outward-oriented facet arrays; surfaces must not share nodes).
 
@@ -320,7 +272,6 @@ class ContactPair:
             smooth_normals,
             penalty_factor,
             master_part=np.concatenate(part_ids),
-            corner_deg=corner_deg,
         )
         return obj
 
@@ -337,7 +288,6 @@ class ContactPair:
         smooth_normals,
         penalty_factor,
         master_part=None,
-        corner_deg=30.0,
     ):
         """Common set-up: slave nodes (ns,), their areas, master facets and per slave its facet ids."""
         self.dim = p.shape[0]
@@ -367,7 +317,6 @@ class ContactPair:
             if not self.smooth_normals:
                 self.prev[:] = -1
                 self.next[:] = -1
-            self.corner_a, self.corner_b = _convex_corners(p, master_facets, self.prev, self.next, corner_deg)
         else:
             # per facet and reference direction (xi, eta) the range [lo, hi]: widened only across a free
             # edge (an edge of no other master facet), so that coplanar faces meeting at a corner are not
@@ -455,8 +404,7 @@ class ContactPair:
         cand = np.take_along_axis(self._pool, np.argpartition(near, k - 1, axis=1)[:, :k], axis=1)  # (ns, k)
         mn = self._nodes_2d(cand.ravel())
         X = np.concatenate([np.repeat(xs, k, axis=0)[:, None, :], x[:, mn].transpose(1, 2, 0)], axis=1)
-        c = cand.ravel()
-        xi, n, g = _segment_2d(X, self.prev[c] >= 0, self.next[c] >= 0, self.corner_a[c], self.corner_b[c])
+        xi, n, g = _segment_2d(X, self.prev[cand.ravel()] >= 0, self.next[cand.ravel()] >= 0)
         xi, n, g = xi.reshape(ns, k), n.reshape(ns, k, 2), g.reshape(ns, k)
         xa, t = X[:, 1].reshape(ns, k, 2), (X[:, 2] - X[:, 1]).reshape(ns, k, 2)
         # facets whose (extended) range holds the projection first, then the one
@@ -482,8 +430,8 @@ class ContactPair:
         """
         xs, xm = X[:, 0], X[:, 1:]
         if self.dim == 2:
-            lo, hi, has_prev, has_next, *corners = lim
-            xi, n, _ = _segment_2d(X, has_prev, has_next, *corners)
+            lo, hi, has_prev, has_next = lim
+            xi, n, _ = _segment_2d(X, has_prev, has_next)
             N = np.stack([1.0 - xi, xi, np.zeros_like(xi), np.zeros_like(xi)], axis=1)
             # the fade applies only past a free edge (an extension); at an end shared with the next facet
             # (lo = 0 / hi = 1) a projection a round-off outside still carries the full force, else a slave
@@ -549,7 +497,7 @@ class ContactPair:
         ma = m[act]
         if dim == 2:  # slave, facet (a, b) and the neighbours that set its nodal normals
             nodes = np.concatenate([self.slave[act, None], self._nodes_2d(ma)], axis=1)
-            lim = (self.lo[ma], self.hi[ma], self.prev[ma] >= 0, self.next[ma] >= 0, self.corner_a[ma], self.corner_b[ma])
+            lim = (self.lo[ma], self.hi[ma], self.prev[ma] >= 0, self.next[ma] >= 0)
         else:
             nodes = np.concatenate([self.slave[act, None], self.master[ma]], axis=1)
             lim = (self.lim[ma],)
