@@ -57,6 +57,7 @@ from workflow.actuator.mapping import map_pairs
 from workflow.actuator.pressure_limit import PressureLimit, clip_pressures, material_limit, smallest
 from workflow.common.constants import GROUPS, JOINTS
 from workflow.fea_check.model import PatientFEA
+from workflow.fem import cumulative_attempts, first_converged
 from workflow.fem.coupled import CoupledResult, solve_coupled
 
 __all__ = [
@@ -123,25 +124,12 @@ def solve_with_restarts(
 ) -> CoupledResult:
     """``solve_coupled``, and if it stalls, again from the same start with each of ``fea.restarts`` applied over the
     previous ones (contact band mm, solver options); the first full solve, else the one that got furthest."""
-    best = solve_coupled(fea.setup, pressures, solver=solver, u_gravity=u_gravity)
-    contact, opts = dict(fea.setup.contact), dict(solver)
-    for k, r in enumerate(fea.restarts, start=2):
-        if best.status == 0:
-            break
-        contact.update(dict(r.get("contact", {})))
-        opts.update(dict(r.get("solver", {})))
-        res = solve_coupled(replace(fea.setup, contact=dict(contact)), pressures, solver=opts, u_gravity=u_gravity)
-        log.info(
-            "attempt %d (band %g mm, %s): status %d at load factor %.3f",
-            k,
-            contact.get("smoothing_mm", 0.0),
-            {key: v for key, v in opts.items() if key in ("predictor", "max_step")},
-            res.status,
-            res.load_factor,
-        )
-        if res.status == 0 or res.load_factor > best.load_factor:
-            best = res
-    return best
+
+    def solve(contact: dict, opts: dict) -> CoupledResult:
+        return solve_coupled(replace(fea.setup, contact=contact), pressures, solver=opts, u_gravity=u_gravity)
+
+    attempts = cumulative_attempts(fea.setup.contact, solver, fea.restarts)
+    return first_converged(attempts, solve, label="finger-actuator solve")[0]
 
 
 def gravity_state(fea: PatientFEA, solver: Mapping) -> CoupledResult:

@@ -74,6 +74,7 @@ def write_standalone_exercise(
         solver=solver,
         p2=p2,
         flag=flag,
+        restarts=list(fea_cfg.get("restarts", [])),
     )
     write_dataset(
         ds,

@@ -55,12 +55,15 @@ def standalone_dataset(
     solver: Mapping,
     p2: np.ndarray,
     flag: np.ndarray,
+    restarts: Sequence[Mapping] = (),
     n_stations: int = 41,
 ) -> xr.Dataset:
     """Solve every (exercise, model) and collect curves and tip angles.
 
     ``h_3d_mm``: one element size or several, tried coarse to fine per
-    exercise until the 3D solve reaches the full pressures.
+    exercise until the 3D solve reaches the full pressures; on each, a solve
+    that stalls is tried again with each of ``restarts`` applied over the
+    previous ones (as the finger-actuator check, ``fea_check.restarts``).
     """
     h3_list = sorted(np.atleast_1d(np.asarray(h_3d_mm, float)).tolist(), reverse=True)
     geom = dict(fem.DEFAULT_GEOMETRY)
@@ -77,6 +80,7 @@ def standalone_dataset(
     status = np.full(shape, -1, dtype="i1")
     its, ndofs = np.zeros(shape, dtype="i4"), np.zeros(shape, dtype="i4")
     h_used = np.full(shape, np.nan)
+    attempt = np.zeros(shape, dtype="i1")
     meshes = {}
     mat = actuator_cfg.get("material")
     contact = {k: v for k, v in dict(actuator_cfg.get("contact", {})).items() if k != "enabled"}
@@ -97,10 +101,18 @@ def standalone_dataset(
             press = {g: (float(pk[k, 0]), float(pk[k, 1])) for k, g in enumerate(GROUPS)}
             t_case = 0.0
             for h in h3_list if dim == 3 else [float(h_2d_mm)]:
-                r = solve_standalone(
-                    mesh(dim, h), press, material=mat, contact_options=contact, solver=solver, formulation=formulation
-                )
-                t_case += r.wall_time_s
+                spent = []
+
+                def solve(contact_opts, opts, um=mesh(dim, h), press=press):
+                    res = solve_standalone(
+                        um, press, material=mat, contact_options=contact_opts, solver=opts, formulation=formulation
+                    )
+                    spent.append(res.wall_time_s)
+                    return res
+
+                label = f"{ex} {m} (h = {h:g} mm)"
+                r, k = fem.first_converged(fem.cumulative_attempts(contact, solver, restarts), solve, label=label)
+                t_case += sum(spent)
                 log.info(
                     "%s %s (h = %g mm, %d dofs): tip %.1f deg, status %d at %.3f, %d its, %.1f s",
                     ex,
@@ -119,6 +131,7 @@ def standalone_dataset(
             bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)
             tip[i, j], lam[i, j], status[i, j] = r.tip_angle_deg, r.load_factor, r.status
             its[i, j], wall[i, j], ndofs[i, j], h_used[i, j] = r.newton_iterations, t_case, r.ndofs, h
+            attempt[i, j] = k
             pen[i, j], overlap[i, j], pocket[dim][i, j] = r.max_penetration_mm, r.overlap_depth_mm, r.min_pocket
     flag_vals = np.array(sorted(SOLVER_STATUS), dtype="i1")
     map_vals = np.array(sorted(CHECK_MAPPING_STATUS), dtype="i1")
@@ -185,6 +198,14 @@ def standalone_dataset(
                 ("exercise", "model"),
                 pocket[3],
                 {"units": "mm3", "long_name": "smallest pocket volume over the path (3D models)"},
+            ),
+            "attempt": (
+                ("exercise", "model"),
+                attempt,
+                {
+                    "units": "1",
+                    "long_name": "solve kept: 0 as configured, k the k-th of fea_check.restarts over the others",
+                },
             ),
             "h_used_mm": (
                 ("exercise", "model"),

@@ -51,6 +51,7 @@ from ._material import mooney_rivlin_isochoric, neo_hooke_compressible
 from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh, layer_counts
 from ._overlap import overlap_depth, overlap_measures, pocket_sizes
 from ._pressure import pressure_load
+from ._restarts import cumulative_attempts, first_converged, separate_attempts
 from ._solve import DEFAULT_SOLVER, Model, PathResult, linear_solve, solve_path
 from ._unit import (
     CASES,
@@ -93,6 +94,8 @@ __all__ = [
     "clamp_inclination_deg",
     "clamp_rotation",
     "contact_penalty",
+    "cumulative_attempts",
+    "first_converged",
     "held_end_nodes",
     "layer_counts",
     "layer_options",
@@ -104,6 +107,7 @@ __all__ = [
     "overlap_measures",
     "pocket_sizes",
     "pressure_load",
+    "separate_attempts",
     "solid_assembler",
     "solve_path",
     "solve_unit",

@@ -12,6 +12,7 @@ from workflow.common.constants import SOLVER_STATUS
 from workflow.common.runlog import solved
 
 from ._mesh import build_unit_mesh
+from ._restarts import first_converged, separate_attempts
 from ._unit import DEFAULT_CONTACT, DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
 
 __all__ = ["DEFAULT_RESTARTS", "layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check"]
@@ -43,13 +44,6 @@ DEFAULT_RESTARTS = (
 )
 
 
-def _merged(actuator: Mapping, override: Mapping) -> dict:
-    out = dict(actuator)
-    for key, val in override.items():
-        out[key] = dict(actuator.get(key, {}), **val) if isinstance(val, Mapping) else val
-    return out
-
-
 def solve_unit_from_config(
     actuator: Mapping, dim: int, p_top_kpa: float, p_bottom_kpa: float, case: str = "free", mesh=None, **kwargs
 ) -> UnitResult:
@@ -65,45 +59,35 @@ def solve_unit_from_config(
     um = mesh if mesh is not None else unit_mesh_from_config(actuator, dim)
     kwargs.setdefault("end_hold", actuator.get("end_hold", DEFAULT_END_HOLD))
     kwargs.setdefault("formulation", actuator.get("formulation", DEFAULT_FORMULATION))
-    tries = [{}] + list(actuator.get("restarts", DEFAULT_RESTARTS))  # restarts: [] for none
-    best, spent = None, 0.0
-    for attempt, override in enumerate(tries):
-        act = _merged(actuator, override)
-        contact = dict(act.get("contact", {}))
-        enabled = contact.pop("enabled", True)
-        if attempt and not enabled and set(override) <= {"contact"}:
-            continue  # without contact a contact-only restart repeats the same solve
+    contact = dict(actuator.get("contact", {}))
+    enabled = contact.pop("enabled", True)
+    restarts = list(actuator.get("restarts", DEFAULT_RESTARTS))  # restarts: [] for none
+    if not enabled:  # without contact a contact-only restart repeats the same solve
+        restarts = [r for r in restarts if set(r) - {"contact"}]
+    spent = 0.0
+
+    def solve(contact_opts: dict, solver: dict) -> UnitResult:
+        nonlocal spent
         res = solve_unit(
             um,
             p_top_kpa,
             p_bottom_kpa,
             case,
             enabled,
-            material=act.get("material"),
-            contact_options=contact,
-            solver=act.get("solver"),
+            material=actuator.get("material"),
+            contact_options=contact_opts,
+            solver=solver,
             **kwargs,
         )
-        res.attempt = attempt
-        res.contact_smoothing_mm = float(contact.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
+        res.contact_smoothing_mm = float(contact_opts.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
         spent += res.wall_time_s
-        res.wall_time_s = spent  # the cost of the result includes the attempts before it
-        if res.status == 0:
-            return res
-        if best is None or res.load_factor > best.load_factor:
-            best = res
-        log.info(
-            "%dd %s to (%g, %g) kPa: attempt %d stopped at %.0f %% (%s)",
-            dim,
-            case,
-            p_top_kpa,
-            p_bottom_kpa,
-            attempt + 1,
-            100 * res.load_factor,
-            res.reason,
-        )
-    best.wall_time_s = spent
-    return best
+        return res
+
+    label = f"{dim}d {case} to ({p_top_kpa:g}, {p_bottom_kpa:g}) kPa"
+    res, attempt = first_converged(separate_attempts(contact, actuator.get("solver", {}), restarts), solve, label=label)
+    res.attempt = attempt
+    res.wall_time_s = spent  # the cost of the result includes every attempt
+    return res
 
 
 def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 300.0)):
