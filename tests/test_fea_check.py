@@ -349,8 +349,27 @@ def test_correction_step_stops_when_the_pressures_are_at_their_limit(monkeypatch
     assert "P_CMC_T/P_MCP_T at 300 kPa" in cor.stop_reason
 
 
-def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
+def _standalone_result(um, status, load_factor, tip_deg, curve, ref):
+    """A stand-in for ``solve_standalone``'s result (the stand-alone study only reads these fields)."""
     from types import SimpleNamespace
+
+    return SimpleNamespace(
+        status=status,
+        load_factor=load_factor,
+        tip_angle_deg=tip_deg,
+        backbone_mm=curve,
+        backbone_ref_mm=ref,
+        newton_iterations=5,
+        wall_time_s=1.0,
+        ndofs=int(um.mesh.p.size),
+        max_penetration_mm=0.01,
+        overlap_depth_mm=0.0,
+        min_pocket=30.0,
+        reason="",
+    )
+
+
+def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
 
     import xarray as xr
 
@@ -362,19 +381,7 @@ def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
         tried.append((um.dim, um.h))
         ok = um.dim == 2 or um.h < 3.5  # the 4 mm 3D mesh "fails"
         curve = np.column_stack([np.linspace(0, um.length, 5), np.zeros(5)] + ([np.zeros(5)] if um.dim == 3 else []))
-        return SimpleNamespace(
-            status=0 if ok else 1,
-            load_factor=1.0 if ok else 0.4,
-            tip_angle_deg=10.0 if ok else 4.0,
-            backbone_mm=curve,
-            backbone_ref_mm=curve,
-            newton_iterations=5,
-            wall_time_s=1.0,
-            ndofs=int(um.mesh.p.size),
-            max_penetration_mm=0.01,
-            overlap_depth_mm=0.0,
-            min_pocket=30.0,
-        )
+        return _standalone_result(um, 0 if ok else 1, 1.0 if ok else 0.4, 10.0 if ok else 4.0, curve, curve)
 
     monkeypatch.setattr(FS, "solve_standalone", fake_solve)
     plan = xr.Dataset(
@@ -403,7 +410,6 @@ def test_standalone_3d_takes_the_coarsest_mesh_that_converges(monkeypatch):
 def test_standalone_exercises_solved_apart_merge_into_the_dataset_solved_together(monkeypatch, tmp_path):
     """The workflow solves each exercise's stand-alone models in a job of its own; joined, they are the dataset of
     one solve over all exercises, model comparisons included, through a netCDF round trip."""
-    from types import SimpleNamespace
 
     import xarray as xr
 
@@ -414,19 +420,8 @@ def test_standalone_exercises_solved_apart_merge_into_the_dataset_solved_togethe
         bend = sum(t - b for t, b in press.values()) / (100.0 * um.dim)
         s = np.linspace(0, um.length, 7)
         curve = np.column_stack([s, bend * s**2 / um.length] + ([np.zeros(7)] if um.dim == 3 else []))
-        return SimpleNamespace(
-            status=0,
-            load_factor=1.0,
-            tip_angle_deg=10.0 * bend,
-            backbone_mm=curve,
-            backbone_ref_mm=np.column_stack([s, np.zeros(7)] + ([np.zeros(7)] if um.dim == 3 else [])),
-            newton_iterations=5,
-            wall_time_s=1.0,
-            ndofs=int(um.mesh.p.size),
-            max_penetration_mm=0.01,
-            overlap_depth_mm=0.0,
-            min_pocket=30.0,
-        )
+        ref = np.column_stack([s, np.zeros(7)] + ([np.zeros(7)] if um.dim == 3 else []))
+        return _standalone_result(um, 0, 1.0, 10.0 * bend, curve, ref)
 
     monkeypatch.setattr(FS, "solve_standalone", fake_solve)
     exercises = ["TGE1", "TGE2"]
