@@ -73,14 +73,23 @@ def test_inverse_backs_off_from_a_failed_forward_solve_and_records_it():
     p0 = np.zeros(8)
     y0, ok0 = forward(p0)
     res = bounded_broyden(
-        forward, p0, y0, ok0, [90.0, 0.0, 0.0], _chain_jacobian(), lo=0.0, hi=P_MAX, tol=2.0, budget=8
+        forward,
+        p0,
+        y0,
+        ok0,
+        [90.0, 0.0, 0.0],
+        _chain_jacobian(),
+        lo=0.0,
+        hi=P_MAX,
+        tol=2.0,
+        budget=8,
+        max_step_kpa=40.0,
     )
     assert res.reached, res.reason
     # the stalled solve is recorded, the next step is half as long and still gets there
-    assert (
-        res.ok[1] is False and not all(res.ok) and np.isnan(res.angles_deg[res.ok.index(False)]).all()
-    )  # the failure is recorded
-    assert res.ok[res.best]
+    assert res.ok[1] is False and np.isnan(res.angles_deg[1]).all() and res.ok[res.best]
+    first, second = (np.max(np.abs(res.pressures_kpa[k] - p0)) for k in (1, 2))
+    assert first == pytest.approx(40.0) and second == pytest.approx(20.0)
 
 
 def test_inverse_stops_at_its_budget():
@@ -91,3 +100,28 @@ def test_inverse_stops_at_its_budget():
         forward, p0, y0, ok0, [90.0, 90.0, 60.0], _chain_jacobian(), lo=0.0, hi=P_MAX, tol=1e-6, budget=2
     )
     assert not res.reached and res.solves == 2 and "budget" in res.reason
+
+
+def test_inverse_keeps_a_tied_group_within_the_tightest_bound_of_its_members():
+    forward, _ = _double()
+    hi = np.full(8, P_MAX)
+    hi[0] = 100.0  # the CMC top chamber bears less: with P_CMC = P_MCP, so does the MCP top chamber
+    p0 = np.zeros(8)
+    y0, ok0 = forward(p0)
+    E = tie_matrix(8, [(0, 2), (1, 3)])
+    res = bounded_broyden(
+        forward, p0, y0, ok0, [120.0, 0.0, 0.0], _chain_jacobian(), lo=0.0, hi=hi, tol=2.0, budget=6, E=E
+    )
+    assert not res.reached and all(p[0] <= 100.0 + 1e-9 and p[2] <= 100.0 + 1e-9 for p in res.pressures_kpa)
+    assert res.blocking == ["P_CMC_T/P_MCP_T", "P_CMC_B/P_MCP_B"]  # top at its bound, bottom already empty
+
+
+def test_inverse_says_so_when_its_steps_shrink_after_stalled_solves():
+    forward, _ = _double(fail_calls=set(range(1, 20)))  # every solve after the start stalls
+    p0 = np.zeros(8)
+    y0, ok0 = forward(p0)
+    res = bounded_broyden(
+        forward, p0, y0, ok0, [90.0, 0.0, 0.0], _chain_jacobian(), lo=0.0, hi=P_MAX, tol=2.0, budget=20
+    )
+    assert not res.reached and "shrank" in res.reason and res.blocking == []
+    assert res.solves < 20 and not any(res.ok[1:])

@@ -49,13 +49,12 @@ import logging
 import time
 import tracemalloc
 from dataclasses import dataclass, replace
-from typing import Callable, Mapping
+from typing import Mapping
 
 import numpy as np
 
-from workflow.actuator.mapping import map_pairs
-from workflow.actuator.pressure_limit import PressureLimit, clip_pressures, material_limit, smallest
 from workflow.common.constants import GROUPS, JOINTS
+from workflow.fea_check.applied import applied_limit, pressures_2d
 from workflow.fea_check.model import PatientFEA
 from workflow.fem import cumulative_attempts, first_converged
 from workflow.fem.coupled import CoupledResult, solve_coupled
@@ -71,52 +70,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-def applied_limit(actuator_cfg: Mapping | None, p_max_2d_kpa: float = np.inf) -> PressureLimit:
-    """Bound (kPa) of every pressure applied to a 2D model: the silicone's limit and the 2D sweep's range."""
-    return smallest(
-        material_limit((actuator_cfg or {}).get("material")),
-        PressureLimit(float(p_max_2d_kpa), "the range the 2D surrogate's sweep sampled"),
-    )
-
-
-def pressures_2d(
-    p3: np.ndarray,
-    angle_3d: Callable | None,
-    angle_2d: Callable | None,
-    *,
-    p_max_2d_kpa: float,
-    p_max_3d_kpa: float = np.inf,
-    limit: PressureLimit | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """2D pressures (..., 2) for 3D pairs ``p3`` (..., 2: top, bottom) in kPa, and the mapping flag per pair.
-
-    Without surrogates (``angle_3d`` is None) the pressures are returned
-    unchanged (flag 3).  Every pressure returned is at most ``p_max_2d_kpa``
-    and ``limit`` (:func:`applied_limit`); a pair cut back to that is flag 4.
-    """
-    p3 = np.asarray(p3, float)
-    limit = smallest(limit, PressureLimit(float(p_max_2d_kpa), "the 2D pressure range"))
-    if angle_3d is None or angle_2d is None:
-        p2, flag = p3.copy(), np.full(p3.shape[:-1], 3, dtype=np.int8)
-    else:
-        p_edge = limit.kpa  # the search stays inside the limit: "not reached" rather than a pair beyond it
-        r = map_pairs(p3[..., 0], p3[..., 1], angle_3d, angle_2d, p_max_2d_kpa=p_edge, p_max_3d_kpa=p_max_3d_kpa)
-        p2 = np.stack([r["p_top_2d_kpa"], r["p_bottom_2d_kpa"]], axis=-1)
-        flag = np.zeros(p3.shape[:-1], dtype=np.int8)
-        eq = r["status"] == 1
-        p2[eq] = p3[eq]
-        flag[eq] = 1
-        out = r["status"] == 2
-        pmax = np.maximum(p3[..., 0], p3[..., 1])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s = np.where(pmax > 0, p_edge / pmax, 1.0)
-        p2[out] = p3[out] * s[out][..., None]
-        flag[out] = 2
-    p2, cut = clip_pressures(p2, limit, what="pressures applied to the 2D model")
-    flag[cut.any(axis=-1)] = 4
-    return p2, flag
 
 
 def solve_with_restarts(

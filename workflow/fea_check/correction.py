@@ -102,6 +102,9 @@ def correct_exercise(
     if outcome(first, target, tolerance_deg, limits_nm)[0]:
         cor.stop_reason = "reached by the plan"
         return cor
+    if first.result.status != 0:
+        cor.stop_reason = "the plan's own FEA check did not converge: no correction attempted"
+        return cor
     p_max = float(plan_opts.get("p_max_kpa", 300.0))
     p8 = pressures_vector(np.asarray(p_plan, float).ravel())
 
@@ -142,9 +145,16 @@ def correct_exercise(
         E=tie,
         min_step_kpa=float(min_change_kpa),
     )
-    # the kept iterate: fewest joints off target with the safety limits held, then least error
-    scores = [outcome(c, target, tolerance_deg, limits_nm)[1] for c in cor.checks]  # a stalled solve scores +3
-    cor.best = min(range(len(scores)), key=scores.__getitem__)
+
+    # the kept iterate: the safety limits held first, then fewest joints off target (a stalled solve counts 3 more),
+    # then least error
+    def rank(c: ExerciseCheck):
+        return (
+            bool(np.any(np.abs(c.max_actuator_moment_nm) > limits_nm)),
+            *outcome(c, target, tolerance_deg, limits_nm)[1],
+        )
+
+    cor.best = min(range(len(cor.checks)), key=lambda k: rank(cor.checks[k]))
     reached = outcome(cor.checks[cor.best], target, tolerance_deg, limits_nm)[0]
     cor.stop_reason = (
         f"reached after {cor.iterations} correction(s)"

@@ -1,4 +1,5 @@
-"""Rule entry point of the FEA check (``fea_check``; the stand-alone actuators are :mod:`.entry_standalone`):
+"""Rule entry points of the FEA check (``fea_check``) and of the stand-alone actuators' join (``standalone_actuator``;
+their FEA per exercise is :mod:`.entry_standalone`):
 read the plan and the patient's inputs, build the FE model, run the check, write
 the dataset, the deformed meshes (.vtu) and the poses plot.
 """
@@ -23,10 +24,11 @@ from workflow.common.vtu import write_vtu
 from workflow.fea_check.check import applied_limit
 from workflow.fea_check.entry_standalone import load_surrogate_angles
 from workflow.fea_check.model import build_patient_fea
-from workflow.fea_check.plots import plot_fea_poses
+from workflow.fea_check.plots import plot_fea_poses, plot_standalone
 from workflow.fea_check.run import run_fea_check
+from workflow.fea_check.standalone import merge_exercises
 
-__all__ = ["PatientSetup", "load_patient_setup", "load_surrogate_angles", "write_fea_check"]
+__all__ = ["PatientSetup", "load_patient_setup", "load_surrogate_angles", "write_fea_check", "write_standalone"]
 
 log = logging.getLogger(__name__)
 
@@ -200,4 +202,28 @@ def write_fea_check(
             title=f"patient {patient_name}",
             corrected_states=corrected,
         )
+    return ds
+
+
+def write_standalone(
+    patient_name: str,
+    *,
+    part_ncs: Sequence[str],
+    out_nc: str,
+    out_png: str | None,
+    config_slice: Any,
+    rule: str = "standalone_actuator",
+) -> xr.Dataset:
+    """Join the exercises solved apart into the patient's stand-alone dataset and draw it (Fig. 22)."""
+    ds = merge_exercises([open_result(p) for p in part_ncs])
+    ds.attrs["patient"] = patient_name
+    write_dataset(
+        ds,
+        out_nc,
+        rule=rule,
+        config_slice=config_slice,
+        title=f"Stand-alone whole actuators at the plan's pressures, patient {patient_name}",
+    )
+    if out_png:
+        plot_standalone(ds, out_png, title=f"patient {patient_name}")
     return ds

@@ -1,14 +1,14 @@
-"""Rule entry points of the stand-alone whole actuators (paper Fig. 22): ``standalone_exercise`` solves one
-exercise's models, ``standalone_actuator`` joins the exercises and draws them.
+"""Rule entry point of the stand-alone whole actuators' FEA (paper Fig. 22): ``standalone_exercise`` solves one
+exercise's models (joined and drawn by ``standalone_actuator``, :func:`workflow.fea_check.entry.write_standalone`).
 
 A module of its own because a rule's inputs are the code it imports: the minutes of 3D FEA per exercise must not
-rerun when the finger-actuator check changes.
+rerun when the finger-actuator check or the figures change.
 """
 
 from __future__ import annotations
 
 import logging
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
 import numpy as np
 import xarray as xr
@@ -16,11 +16,10 @@ import xarray as xr
 from workflow.actuator.surrogates import load_surrogate
 from workflow.common.constants import CHAMBERS, GROUPS
 from workflow.common.provenance import open_result, write_dataset
-from workflow.fea_check.check import applied_limit, pressures_2d
-from workflow.fea_check.plots import plot_standalone
-from workflow.fea_check.standalone import MODELS, merge_exercises, standalone_dataset
+from workflow.fea_check.applied import applied_limit, pressures_2d
+from workflow.fea_check.standalone import MODELS, standalone_dataset
 
-__all__ = ["load_surrogate_angles", "standalone_exercises", "write_standalone_exercise", "write_standalone"]
+__all__ = ["load_surrogate_angles", "write_standalone_exercise"]
 
 log = logging.getLogger(__name__)
 
@@ -32,12 +31,6 @@ def load_surrogate_angles(surrogate_2d: str | None, surrogate_3d: str | None):
 
     s2, s3 = load_surrogate(surrogate_2d), load_surrogate(surrogate_3d)
     return s3.angle_deg, s2.angle_deg, float(s2.p_max_kpa), float(s3.p_max_kpa)
-
-
-def standalone_exercises(fea_cfg: Mapping, all_exercises: Sequence[str]) -> list[str]:
-    """The exercises of the stand-alone study: ``fea_check.standalone.exercises``, else the check's, else all."""
-    sa = dict(fea_cfg.get("standalone", {}))
-    return [str(e) for e in (sa.get("exercises") or fea_cfg.get("exercises") or all_exercises)]
 
 
 def write_standalone_exercise(
@@ -83,28 +76,4 @@ def write_standalone_exercise(
         config_slice=config_slice,
         title=f"Stand-alone whole actuators at the plan's pressures of {exercise}",
     )
-    return ds
-
-
-def write_standalone(
-    patient_name: str,
-    *,
-    part_ncs: Sequence[str],
-    out_nc: str,
-    out_png: str | None,
-    config_slice: Any,
-    rule: str = "standalone_actuator",
-) -> xr.Dataset:
-    """Join the exercises solved apart into the patient's stand-alone dataset and draw it (Fig. 22)."""
-    ds = merge_exercises([open_result(p) for p in part_ncs])
-    ds.attrs["patient"] = patient_name
-    write_dataset(
-        ds,
-        out_nc,
-        rule=rule,
-        config_slice=config_slice,
-        title=f"Stand-alone whole actuators at the plan's pressures, patient {patient_name}",
-    )
-    if out_png:
-        plot_standalone(ds, out_png, title=f"patient {patient_name}")
     return ds

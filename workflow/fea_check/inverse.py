@@ -94,15 +94,19 @@ def bounded_broyden(
     n = p0.size
     E = np.eye(n) if E is None else np.asarray(E, float)
     m = E.shape[1]
-    lo_z = np.broadcast_to(np.asarray(lo, float), (n,)) @ E / E.sum(axis=0)
-    hi_z = np.broadcast_to(np.asarray(hi, float), (n,)) @ E / E.sum(axis=0)
-    z = np.clip(np.linalg.lstsq(E, p0, rcond=None)[0], lo_z, hi_z)
+    # a tied group's bounds: the tightest of its members'
+    lo_p, hi_p = np.broadcast_to(np.asarray(lo, float), (n,)), np.broadcast_to(np.asarray(hi, float), (n,))
+    lo_z = np.array([lo_p[E[:, c] > 0].max() for c in range(m)])
+    hi_z = np.array([hi_p[E[:, c] > 0].min() for c in range(m)])
+    z = np.linalg.lstsq(E, p0, rcond=None)[0]
+    if not np.allclose(E @ z, p0, atol=1e-6) or np.any(z < lo_z - 1e-6) or np.any(z > hi_z + 1e-6):
+        raise ValueError("the start's pressures break the tie or the bounds: its angles would not belong to it")
     z_ref = np.zeros(m) if z_ref is None else np.asarray(z_ref, float)
     target = np.asarray(target, float)
     J = np.asarray(J0, float) @ E  # in the free pressures
     res = InverseResult([E @ z], [np.asarray(y0, float)], [bool(ok0)])
     if not ok0:
-        res.reason = "the start's forward solve failed"
+        res.reason = "the start's forward solve did not converge: no step attempted"
         return res
     best_z, best_y, best_score = z, np.asarray(y0, float), _score(target - y0)
     step_scale = 1.0
@@ -121,6 +125,12 @@ def bounded_broyden(
         lb = np.maximum(lo_z - best_z, -room)
         ub = np.minimum(hi_z - best_z, room)
         dz = lsq_linear(A, b, bounds=(lb, ub + 1e-12)).x
+        if np.max(np.abs(dz)) < min_step_kpa and step_scale < 1.0:
+            res.reason = (
+                f"the step shrank below {min_step_kpa:g} kPa after {res.solves} forward solve(s) that stalled or "
+                "did not improve"
+            )
+            break
         if np.max(np.abs(dz)) < min_step_kpa:
             free = np.linalg.lstsq(J, err, rcond=None)[0]  # where the unbounded step would go
             at_hi = (best_z >= hi_z - 1e-9) & (free > min_step_kpa)

@@ -59,15 +59,18 @@ def solve_unit_from_config(
     um = mesh if mesh is not None else unit_mesh_from_config(actuator, dim)
     kwargs.setdefault("end_hold", actuator.get("end_hold", DEFAULT_END_HOLD))
     kwargs.setdefault("formulation", actuator.get("formulation", DEFAULT_FORMULATION))
-    contact = dict(actuator.get("contact", {}))
-    enabled = contact.pop("enabled", True)
     restarts = list(actuator.get("restarts", DEFAULT_RESTARTS))  # restarts: [] for none
-    if not enabled:  # without contact a contact-only restart repeats the same solve
-        restarts = [r for r in restarts if set(r) - {"contact"}]
+    attempts = separate_attempts(actuator.get("contact", {}), actuator.get("solver", {}), restarts)
+    # without contact a contact-only restart repeats the same solve: skipped, the others keep their numbers
+    index = [
+        k for k, (c, _) in enumerate(attempts) if k == 0 or c.get("enabled", True) or set(restarts[k - 1]) - {"contact"}
+    ]
     spent = 0.0
 
     def solve(contact_opts: dict, solver: dict) -> UnitResult:
         nonlocal spent
+        opts = dict(contact_opts)
+        enabled = opts.pop("enabled", True)
         res = solve_unit(
             um,
             p_top_kpa,
@@ -75,16 +78,17 @@ def solve_unit_from_config(
             case,
             enabled,
             material=actuator.get("material"),
-            contact_options=contact_opts,
+            contact_options=opts,
             solver=solver,
             **kwargs,
         )
-        res.contact_smoothing_mm = float(contact_opts.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
+        res.contact_smoothing_mm = float(opts.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
         spent += res.wall_time_s
         return res
 
     label = f"{dim}d {case} to ({p_top_kpa:g}, {p_bottom_kpa:g}) kPa"
-    res, attempt = first_converged(separate_attempts(contact, actuator.get("solver", {}), restarts), solve, label=label)
+    res, k = first_converged([attempts[k] for k in index], solve, label=label)
+    attempt = index[k]
     res.attempt = attempt
     res.wall_time_s = spent  # the cost of the result includes every attempt
     return res

@@ -1,4 +1,4 @@
-from workflow.fea_check.entry_standalone import write_standalone
+from workflow.fea_check.entry import write_standalone
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821
