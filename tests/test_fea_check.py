@@ -14,7 +14,7 @@ from workflow import fem
 from workflow.cascade import finger as F
 from workflow.cascade import planning
 from workflow.fea_check import correction
-from workflow.fea_check.check import pressures_2d
+from workflow.fea_check.applied import pressures_2d
 from workflow.fea_check.model import finger_profiles, lame, spring_callables
 from workflow.fem._mesh import build_actuator_mesh
 from workflow.fem.actuator import solve_standalone
@@ -161,7 +161,7 @@ def test_pressure_mapping_flags():
 
 
 def test_applied_pressures_stay_under_the_silicone_limit():
-    from workflow.fea_check.check import applied_limit
+    from workflow.fea_check.applied import applied_limit
 
     lim = applied_limit({"material": {"p_limit_kpa": 250.0, "p_limit_source": "test"}}, 300.0)
     assert lim.kpa == 250.0 and lim.source == "actuator.material.p_limit_kpa: test"

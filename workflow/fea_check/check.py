@@ -54,20 +54,11 @@ from typing import Mapping
 import numpy as np
 
 from workflow.common.constants import GROUPS, JOINTS
-from workflow.fea_check.applied import applied_limit, pressures_2d
 from workflow.fea_check.model import PatientFEA
 from workflow.fem import cumulative_attempts, first_converged
 from workflow.fem.coupled import CoupledResult, solve_coupled
 
-__all__ = [
-    "applied_limit",
-    "pressures_2d",
-    "ExerciseCheck",
-    "outcome",
-    "check_exercise",
-    "gravity_state",
-    "solve_with_restarts",
-]
+__all__ = ["ExerciseCheck", "outcome", "check_exercise", "gravity_state", "solve_with_restarts"]
 
 log = logging.getLogger(__name__)
 

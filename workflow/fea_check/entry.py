@@ -21,7 +21,7 @@ from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit
 from workflow.common.constants import JOINTS
 from workflow.common.provenance import open_result, write_dataset
 from workflow.common.vtu import write_vtu
-from workflow.fea_check.check import applied_limit
+from workflow.fea_check.applied import applied_limit
 from workflow.fea_check.entry_standalone import load_surrogate_angles
 from workflow.fea_check.model import build_patient_fea
 from workflow.fea_check.plots import plot_fea_poses, plot_standalone

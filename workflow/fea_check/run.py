@@ -15,7 +15,8 @@ from workflow.actuator.pressure_limit import PressureLimit
 from workflow.cascade.model import solve_equilibrium
 from workflow.common.constants import CHAMBERS, CHECK_MAPPING_STATUS, GROUPS, JOINTS, SOLVER_STATUS
 from workflow.common.runlog import solved
-from workflow.fea_check.check import ExerciseCheck, check_exercise, gravity_state, outcome, pressures_2d
+from workflow.fea_check.applied import pressures_2d
+from workflow.fea_check.check import ExerciseCheck, check_exercise, gravity_state, outcome
 from workflow.fea_check.correction import Correction, _corrections_dataset, correct_exercise
 from workflow.fea_check.model import PatientFEA
 from workflow.fem.coupled import CoupledResult

@@ -4,7 +4,7 @@ The actuator of the plan (``units_per_group``), hand end clamped, no finger,
 no gravity, each exercise's pressures ramped from zero, in up to three models:
 
 * ``2d_mapped``: plane strain at the 2D pressures of the 2D-to-3D mapping
-  (:func:`workflow.fea_check.pressures_2d`), the pressures the FEA check uses;
+  (:func:`workflow.fea_check.applied.pressures_2d`), the pressures the FEA check uses;
 * ``2d_plan``: plane strain at the planned (3D) pressures unchanged (the
   paper's "limited bending" comparison the other way round);
 * ``3d_plan``: the 3D half model at the planned pressures, on the coarsest

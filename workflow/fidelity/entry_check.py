@@ -21,7 +21,8 @@ from workflow.cascade.patient import patient_cascade
 from workflow.common.constants import JOINTS
 from workflow.common.provenance import write_dataset
 from workflow.common.runlog import solved
-from workflow.fea_check.check import applied_limit, check_exercise, gravity_state, pressures_2d
+from workflow.fea_check.applied import applied_limit, pressures_2d
+from workflow.fea_check.check import check_exercise, gravity_state
 from workflow.fea_check.entry import load_patient_setup, load_surrogate_angles
 from workflow.fea_check.model import build_patient_fea
 
