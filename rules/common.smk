@@ -16,6 +16,8 @@ for _warning in settings.check_config(config):
     logger.warning(f"config: {_warning}")
 
 PATIENTS = sorted(config["patients"])
+#: The patients whose plans the default run checks by FEA (fea_check.patients).
+CHECKED = settings.checked_patients(config)
 
 
 wildcard_constraints:
@@ -68,8 +70,9 @@ def get_final_output():
     vp = config["cascade"]["validation_patient"]
     # ... and its stand-alone whole actuators in 2D and 3D (Fig. 22; needs no finger).
     out += [f"results/patients/{vp}/standalone_actuator.nc"]
+    # The validation patient's and the dummy's plans (fea_check.patients) checked on their own fingers.
     if Path(config["cascade"]["section_points"]).is_file():
-        out += [f"results/patients/{vp}/fea_check.nc"]
+        out += expand("results/patients/{patient}/fea_check.nc", patient=CHECKED)
     else:
         logger.warning(
             f"FEA check left out: finger section points {config['cascade']['section_points']} "
@@ -101,8 +104,8 @@ def get_tracking_inputs(wildcards):
         "loads_plot": f"results/patients/{p}/joint_loads.png",
         "plan": f"results/patients/{p}/cascade_plan.nc",
     }
-    # the validation patient's row also carries its FEA check and the fidelity choice
-    if p == config["cascade"]["validation_patient"] and Path(config["cascade"]["section_points"]).is_file():
+    # a checked patient's row also carries its FEA check; every row the fidelity choice
+    if p in CHECKED and Path(config["cascade"]["section_points"]).is_file():
         out["fea_check"] = f"results/patients/{p}/fea_check.nc"
     if fidelity_auto():
         out["fidelity"] = "results/fidelity/fem.nc"
@@ -288,8 +291,10 @@ def get_msk_choice(wildcards):
 
 
 def get_check_choice(wildcards):
-    """Input function: the patient's FEA-check mesh study, when fidelity.auto picks the check's mesh."""
-    return {"check_study": f"results/patients/{wildcards.patient}/fidelity_check.nc"} if fidelity_auto() else {}
+    """Input function: the FEA-check mesh study, when fidelity.auto picks the check's mesh. The study runs on the
+    validation patient; every patient's check takes its choice (one study, not one per patient)."""
+    vp = config["cascade"]["validation_patient"]
+    return {"check_study": f"results/patients/{vp}/fidelity_check.nc"} if fidelity_auto() else {}
 
 
 def get_speed_accuracy_inputs(wildcards):

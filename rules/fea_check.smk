@@ -6,6 +6,7 @@
 #   get_fea_surrogates()     -> {"surrogate_2d": ..., "surrogate_3d": ...}
 #   get_fea_check_slice(wc)  -> the config a patient's check depends on
 #   get_standalone_parts(wc) -> the stand-alone exercises solved apart (one job each: two 3D solves run at once)
+#   CHECKED                  -> the patients the default run checks (fea_check.patients); check_<patient> for any
 
 
 rule fea_check:
@@ -89,3 +90,14 @@ rule standalone_actuator:
         config_slice=get_fea_check_slice,
     script:
         "../workflow/scripts/standalone_actuator.py"
+
+
+# One target per patient (snakemake -c2 check_<patient>): the default run checks fea_check.patients only.
+for _patient in PATIENTS:
+
+    rule:
+        name:
+            f"check_{_patient}"
+        input:
+            f"results/patients/{_patient}/fea_check.nc",
+        localrule: True

@@ -55,6 +55,8 @@ def test_default_config_is_valid(cfg):
         (lambda c: c["surrogates"].update(folds=1), "'folds'"),
         (lambda c: c["surrogates"].update(k=0), "['k']"),
         (lambda c: c["patients"].update({"p/1": {"coded": {"depth": 0, "length": 0, "breadth": 0}}}), "'p/1'"),
+        (lambda c: c["fea_check"].update(patients=["mean", "nobody"]), "fea_check.patients: 'nobody'"),
+        (lambda c: c["fea_check"].update(patients="some"), "'some'"),
     ],
 )
 def test_bad_values_are_named(cfg, mutate, needle):
@@ -62,6 +64,17 @@ def test_bad_values_are_named(cfg, mutate, needle):
     with pytest.raises(Exception) as err:
         _validate(cfg)
     assert needle in str(err.value)
+
+
+def test_checked_patients_default_to_the_validation_patient_and_the_dummy(cfg):
+    assert settings.checked_patients(cfg) == ["mean", "dummy"]
+    cfg["fea_check"]["patients"] = "all"
+    assert settings.checked_patients(cfg) == sorted(cfg["patients"])
+    cfg["fea_check"]["patients"] = ["altered", "altered"]
+    assert settings.checked_patients(cfg) == ["altered"]
+    cfg["fea_check"]["patients"] = None
+    del cfg["cascade"]["dummy_patient"]
+    assert settings.checked_patients(cfg) == ["mean"]
 
 
 def test_missing_table_is_named(cfg):

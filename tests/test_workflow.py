@@ -65,6 +65,13 @@ def test_smoke_outputs(smoke):
             assert set(jl["exercise"].values) == {f"TGE{i}" for i in range(1, 6)}
             assert float(jl["passive_moment_nm"].sel(exercise="TGE1").sum()) == 0
             assert (jl["active_limit_nm"] > 0).all()
+    # both checked patients (fea_check.patients) on fingers of their own dimensions: the mean coded, p01 in mm
+    dims = {}
+    for patient in ("mean", "p01"):
+        with xr.open_dataset(res / "patients" / patient / "fea_check.nc") as fc:
+            assert fc.attrs["patient"] == patient and set(fc["exercise"].values) == {"TGE2"}
+            dims[patient] = fc["finger_dimension_mm"].to_series()
+    assert dims["p01"]["L3PP"] == pytest.approx(52.0) and dims["mean"]["L3PP"] != pytest.approx(52.0)
     assert (res / "musculoskeletal" / "rsm_r2.png").stat().st_size > 10_000
     assert any((res / "benchmarks" / "rules").glob("rsm.tsv"))
     # the run ledger: one MLflow run per patient, with headline metrics

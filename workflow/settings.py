@@ -21,7 +21,7 @@ import yaml
 from workflow.doe import ccd as doe
 from workflow.fem.material_stability import drucker_instabilities
 
-__all__ = ["ConfigError", "check_config", "load_config", "REPO_ROOT", "SCHEMA_PATH"]
+__all__ = ["ConfigError", "check_config", "checked_patients", "load_config", "REPO_ROOT", "SCHEMA_PATH"]
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_PATH = REPO_ROOT / "config" / "schema.yaml"
@@ -73,6 +73,7 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
     dummy = cascade.get("dummy_patient")
     if dummy and config["patients"][dummy].get("model", "human") != "dummy":
         raise ConfigError(f"cascade.dummy_patient = {dummy!r}: that patient needs `model: dummy`")
+    checked_patients(config)  # raises on a name that is no patient
     fid = config.get("fidelity", {})
     for ex in fid.get("check", {}).get("exercises", []):
         if ex not in config["exercises"]:
@@ -211,3 +212,23 @@ def _merge(a: dict, b: Mapping) -> None:
             _merge(a[k], v)
         else:
             a[k] = copy.deepcopy(v)
+
+
+def checked_patients(config: Mapping[str, Any]) -> list[str]:
+    """The patients whose plans the default run checks by FEA (config ``fea_check.patients``).
+
+    ``null`` (the default): the validation patient and the dummy (the paper's PLA finger), those of them that are
+    set; ``all``: every patient; else a list of patient names. Every other patient's check is a target of its own.
+    """
+    names = config.get("fea_check", {}).get("patients")
+    patients = config["patients"]
+    if names is None:
+        cascade = config.get("cascade", {})
+        names = [cascade.get(k) for k in ("validation_patient", "dummy_patient")]
+        return list(dict.fromkeys(n for n in names if n and n in patients))
+    if names == "all":
+        return sorted(patients)
+    for n in names:
+        if n not in patients:
+            raise ConfigError(f"fea_check.patients: {n!r} is no patient (patients: {sorted(patients)})")
+    return list(dict.fromkeys(names))

@@ -169,6 +169,15 @@ def write_fea_check(
             **dict(notes or {}),
         },
     )
+    # the finger the check was built on: the patient's own dimensions (coded levels or measurements)
+    dims = dict(finger.dimensions_mm)
+    ds["finger_dimension_mm"] = xr.DataArray(
+        np.array([dims[k] for k in dims], float),
+        dims="measure",
+        coords={"measure": list(dims)},
+        attrs={"units": "mm", "long_name": "finger dimension of the FE finger (Table 2 codes)"},
+    )
+    ds.attrs["finger_model"] = str(patient.get("model", "human"))
     write_dataset(
         ds,
         out_nc,
