@@ -50,6 +50,27 @@ rule unit_moment_check:
         "../workflow/scripts/unit_moment_check.py"
 
 
+rule unit_stiffness:
+    input:
+        surrogate_2d="results/actuator/surrogate_2d.joblib",
+        code=code_files("scripts.unit_stiffness"),
+    output:
+        nc=report("results/actuator/unit_stiffness.nc", caption="../report/unit_stiffness.rst", category="Actuator"),
+        plot=report("results/actuator/unit_stiffness.png", caption="../report/unit_stiffness.rst", category="Actuator"),
+    log:
+        "logs/actuator/unit_stiffness.log",
+    benchmark:
+        "results/benchmarks/rules/unit_stiffness.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        actuator=config["actuator"],
+        unit_model=config["surrogates"]["unit_model"],
+        config_slice=cfg("actuator") | {"surrogates": {"unit_model": config["surrogates"]["unit_model"]}},
+    script:
+        "../workflow/scripts/unit_stiffness.py"
+
+
 rule sweep_shard:
     input:
         unpack(get_fem_choice),
@@ -147,6 +168,7 @@ rule surrogate_fit:
 rule mapping_2d3d:
     input:
         table="resources/table08_planned_pressures_3d.csv",
+        table07="resources/table07_unit_targets.csv",
         surrogate_3d="results/actuator/surrogate_3d.joblib",
         surrogate_2d="results/actuator/surrogate_2d.joblib",
         code=code_files("scripts.mapping_2d3d"),
@@ -165,6 +187,7 @@ rule mapping_2d3d:
         "../envs/project.yaml"
     params:
         pressure_limit=get_pressure_limit(),
+        unit_model=config["surrogates"]["unit_model"],
         config_slice=get_mapping_slice(),
     script:
         "../workflow/scripts/mapping_2d3d.py"

@@ -160,6 +160,29 @@ def test_pressure_mapping_flags():
     assert flag[0, 0] == 2  # 600 kPa needed
 
 
+def test_loaded_map_needs_more_2d_pressure_where_the_2d_unit_is_weaker():
+    # linear springs: the 2D unit reaches the 3D free angle at half the pressure (free map: scale 0.5) but is 4x
+    # softer; under a moment the loaded map must raise the 2D pressure and stay within the limit
+    from workflow.actuator.unit_model import UnitModel
+
+    def th3(pt, pb):
+        return 0.05 * (np.asarray(pt, float) - np.asarray(pb, float))
+
+    def th2(pt, pb):
+        return 0.1 * (np.asarray(pt, float) - np.asarray(pb, float))
+
+    u3 = UnitModel(th3, lambda pt, pb: 0.02 * th3(pt, pb), p_max_kpa=1e6)
+    u2 = UnitModel(th2, lambda pt, pb: 0.005 * th2(pt, pb), p_max_kpa=1e6)
+    p3 = np.array([[[200.0, 0.0], [100.0, 0.0]]])
+    free, _ = pressures_2d(p3, th3, th2, p_max_2d_kpa=300.0)
+    np.testing.assert_allclose(free[0, :, 0], [100.0, 50.0])
+    m = np.array([[0.05, 0.0]])  # N m on the first group's units, none on the second's
+    p2, flag = pressures_2d(p3, u3.angle_deg, u2.angle_deg, p_max_2d_kpa=300.0, m_ext_nm=m)
+    # 0.1 p - 0.05 / 0.005 = 0.05 * 200 - 0.05 / 0.02  ->  p = 175 kPa; the unloaded group keeps the free map
+    np.testing.assert_allclose(p2[0, :, 0], [175.0, 50.0], rtol=1e-7)
+    assert list(flag[0]) == [0, 0]
+
+
 def test_applied_pressures_stay_under_the_silicone_limit():
     from workflow.fea_check.applied import applied_limit
 

@@ -121,3 +121,46 @@ def test_mapped_2d_pressures_stay_under_the_silicone_limit(tmp_path):
     assert float(ds["pressure_2d_kpa"].max()) <= 250.0
     assert int((ds["status"] == 2).sum()) > int((free["status"] == 2).sum())  # not reached within 250 kPa
     assert ds.attrs["p_max_2d_kpa"] == 250.0 and ds.attrs["p_limit_source"] == limit.source
+    # under Table 7's moments too: same bound, every mapped pair's 3D angle under load reproduced by the 2D unit
+    t7 = REPO_ROOT / "resources" / "table07_unit_targets.csv"
+    ld = entry.write_mapping(
+        TABLE8, paths["3d"], paths["2d"], tmp_path / "l.nc", config_slice={}, material_limit=limit, unit_moments_csv=t7
+    )
+    assert float(np.nanmax(ld["pressure_2d_loaded_kpa"])) <= 250.0
+    assert ld["unit_moment_nm"].sel(exercise="TGE3", group="PIP") == pytest.approx(7.71e-3)
+    # both doubles have the same spring (M_b = 0.001 theta_f): the moment cancels, and where both maps find a pair
+    # it is the free map's; under the moments most pairs need more than 250 kPa (status 2), none is beyond it
+    ok = ((ld["status_loaded"] == 0) & (ld["status"] == 0)).values
+    assert ok.sum() >= 2
+    np.testing.assert_allclose(ld["scale_loaded"].values[ok], ld["scale"].values[ok], rtol=0.02)
+    assert set(np.unique(ld["status_loaded"].values)) <= {0, 1, 2}
+
+
+def test_loaded_map_matches_the_angles_under_the_units_moment():
+    # linear doubles: theta_f3 = g (P_T - P_B), theta_f2(P) = theta_f3(P / a); springs k3 and a weaker k2.
+    # Under an end moment M the 2D scale s solves g s dP / a - M / k2 = g dP - M / k3 exactly:
+    # s = a (1 + M (1/k2 - 1/k3) / (g dP)); at M = 0 it is the free-angle map's s = a.
+    from workflow.actuator.unit_model import UnitModel
+
+    g, a, k3, k2 = 0.1, 0.6, 0.01, 0.004
+
+    def unit(angle):
+        return UnitModel(angle, lambda pt, pb, k=(k3 if angle is th3 else k2): k * angle(pt, pb), p_max_kpa=1e6)
+
+    def th3(pt, pb):
+        return g * (np.asarray(pt, float) - np.asarray(pb, float))
+
+    def th2(pt, pb):
+        return th3(np.asarray(pt, float) / a, np.asarray(pb, float) / a)
+
+    u3, u2 = unit(th3), unit(th2)
+    pt, pb, m = np.array([200.0, 150.0, 100.0]), np.array([0.0, 50.0, 0.0]), np.array([0.02, 0.01, 0.0])
+    r = mapping.map_pairs(pt, pb, u3.angle_deg, u2.angle_deg, p_max_2d_kpa=1e4, m_ext_nm=m)
+    expected = a * (1.0 + m * (1.0 / k2 - 1.0 / k3) / (g * (pt - pb)))
+    assert list(r["status"]) == [0, 0, 0]
+    np.testing.assert_allclose(r["scale"], expected, rtol=1e-7)
+    assert r["scale"][0] > 1.1 * a  # a weaker 2D unit needs more pressure under load
+    np.testing.assert_allclose(r["angle_2d_deg"], r["angle_3d_deg"], atol=1e-7)
+    np.testing.assert_allclose(r["angle_3d_deg"], th3(pt, pb) - m / k3)
+    free = mapping.map_pairs(pt, pb, th3, th2, p_max_2d_kpa=1e4)
+    assert free["scale"][2] == pytest.approx(r["scale"][2], rel=1e-9)

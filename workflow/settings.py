@@ -148,6 +148,10 @@ def _check_pressure_bounds(config: Mapping[str, Any]) -> None:
         for i, p in enumerate(act.get("moment_check", {}).get("pairs_kpa", []))
     ]
     pressures += [
+        (f"actuator.stiffness.pairs_kpa[{i}]", max(p))
+        for i, p in enumerate(act.get("stiffness", {}).get("pairs_kpa", []))
+    ]
+    pressures += [
         (f"fidelity.p_top_kpa[{i}]", p) for i, p in enumerate(config.get("fidelity", {}).get("p_top_kpa", []))
     ]
     for key, p in pressures:

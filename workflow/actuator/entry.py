@@ -10,17 +10,41 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 
-from workflow.actuator.mapping import mapping_dataset, read_planned_pressures
+from workflow import fem
+from workflow.actuator.mapping import map_pairs, mapping_dataset, read_planned_pressures
 from workflow.actuator.moment_check import moment_check
-from workflow.actuator.plots import plot_mapping, plot_moment_check, plot_response, plot_surrogate_cv
+from workflow.actuator.plots import (
+    plot_mapping,
+    plot_moment_check,
+    plot_response,
+    plot_surrogate_cv,
+    plot_unit_stiffness,
+)
 from workflow.actuator.pressure_limit import PressureLimit, smallest
+from workflow.actuator.stiffness import (
+    DEFAULT_STIFFNESS,
+    chain_mesh,
+    compare_model,
+    rotation_stiffness,
+    stiffness_dataset,
+)
 from workflow.actuator.surrogates import Surrogate, fit_surrogate, load_surrogate, save_surrogate, surrogate_cv
 from workflow.actuator.sweep import merge_shards
+from workflow.actuator.unit_model import load_unit_model
+from workflow.common.constants import GROUPS
 from workflow.common.provenance import open_result, write_dataset
 
-__all__ = ["write_response", "write_surrogate_cv", "write_surrogate", "write_mapping", "write_moment_check"]
+__all__ = [
+    "write_response",
+    "write_surrogate_cv",
+    "write_surrogate",
+    "write_mapping",
+    "write_moment_check",
+    "write_unit_stiffness",
+]
 
 log = logging.getLogger(__name__)
 
@@ -135,12 +159,16 @@ def write_mapping(
     rule: str = "mapping_2d3d",
     plot: str | Path | None = None,
     material_limit=None,
+    unit_moments_csv: str | Path | None = None,
+    unit_model: Mapping | None = None,
 ) -> xr.Dataset:
     """Map Table 8 with the fitted 3D and 2D surrogates -> ``mapping_2d3d.nc`` (and the Fig. 17-like plot).
 
     The 2D grid's edge is the smaller of the 2D surrogate's training range (its
     sweep's p_max) and the silicone's limit ``material_limit``
     (:func:`workflow.actuator.pressure_limit.material_limit`): no 2D pair beyond either.
+    With ``unit_moments_csv`` (Table 7: the moment per unit of each group and exercise, N m) the pairs are also
+    mapped under those moments with the unit models (``*_loaded`` variables; `workflow.actuator.mapping`).
     """
 
     s3, s2 = load_surrogate(surrogate_3d), load_surrogate(surrogate_2d)
@@ -152,6 +180,10 @@ def write_mapping(
         p_max_2d_kpa=limit.kpa,
         p_max_3d_kpa=s3.p_max_kpa,
     )
+    if unit_moments_csv is not None:
+        ds = ds.merge(
+            _loaded_map(ds, unit_moments_csv, surrogate_3d, surrogate_2d, unit_model, limit.kpa, s3.p_max_kpa)
+        )
     ds.attrs["surrogate_3d"] = s3.regressor
     ds.attrs["surrogate_2d"] = s2.regressor
     ds.attrs["p_limit_source"] = limit.source
@@ -165,6 +197,44 @@ def write_mapping(
     if plot is not None:
         plot_mapping(ds, plot)
     return ds
+
+
+def _loaded_map(ds, unit_moments_csv, surrogate_3d, surrogate_2d, unit_model, p_max_2d_kpa, p_max_3d_kpa):
+    """The Table 8 pairs of ``ds`` mapped under Table 7's unit moments (variables ``*_loaded``)."""
+    t7 = pd.read_csv(unit_moments_csv).set_index("exercise")
+    ex = [str(e) for e in ds["exercise"].values]
+    m = np.array([[float(t7.loc[e, f"M_{g}_Nm"]) for g in GROUPS] for e in ex])  # (exercise, group)
+    u3 = load_unit_model(surrogate_3d, **dict(unit_model or {}))
+    u2 = load_unit_model(surrogate_2d, **dict(unit_model or {}))
+    p3 = ds["pressure_3d_kpa"].values
+    r = map_pairs(
+        p3[..., 0],
+        p3[..., 1],
+        u3.angle_deg,
+        u2.angle_deg,
+        p_max_2d_kpa=p_max_2d_kpa,
+        p_max_3d_kpa=p_max_3d_kpa,
+        m_ext_nm=m,
+    )
+    dims2 = ("exercise", "group")
+    return xr.Dataset(
+        {
+            "unit_moment_nm": (dims2, m, {"units": "N m", "long_name": "moment per unit (Table 7)"}),
+            "pressure_2d_loaded_kpa": (
+                (*dims2, "chamber"),
+                np.stack([r["p_top_2d_kpa"], r["p_bottom_2d_kpa"]], axis=-1),
+                {"units": "kPa", "long_name": "2D chamber pressure of the same ratio giving the 3D angle under M"},
+            ),
+            "scale_loaded": (dims2, r["scale"], {"units": "1", "long_name": "scale s under the unit moment"}),
+            "angle_3d_loaded_deg": (
+                dims2,
+                r["angle_3d_deg"],
+                {"units": "degree", "long_name": "3D unit angle under the unit moment"},
+            ),
+            "status_loaded": (dims2, r["status"], {"units": "1", "long_name": "mapping status under the unit moment"}),
+        },
+        coords={"exercise": ex, "group": list(GROUPS), "chamber": list(ds["chamber"].values)},
+    )
 
 
 def write_moment_check(
@@ -188,4 +258,44 @@ def write_moment_check(
         source="workflow.fem (three-chamber unit: free, blocked; chain cut at gap centres: free, end rotations)",
     )
     plot_moment_check(ds, plot_path)
+    return ds
+
+
+def write_unit_stiffness(
+    nc_path: str | Path,
+    plot_path: str | Path,
+    actuator: Mapping,
+    surrogate_2d: str | Path | None = None,
+    unit_model: Mapping | None = None,
+    *,
+    rule: str = "unit_stiffness",
+    config_slice=None,
+) -> xr.Dataset:
+    """Run the stiffness study of ``actuator.stiffness`` on the 2D chain; compare the 2D unit model; write both."""
+    st = {**DEFAULT_STIFFNESS, **dict(actuator.get("stiffness") or {})}
+    unit = fem.unit_mesh_from_config(actuator, 2)
+    chain = chain_mesh(unit, int(st["chain_units"]), **fem.layer_options(actuator))
+    log.info(
+        "unit stiffness: %d pressure pairs x 4 solves on a 2D chain of %d (h = %g mm, %d dofs)",
+        len(st["pairs_kpa"]),
+        int(st["chain_units"]),
+        unit.h,
+        chain.mesh.p.size,
+    )
+    res = rotation_stiffness(chain, st["pairs_kpa"], delta_deg=float(st["delta_deg"]), actuator=actuator)
+    cmp = None
+    if surrogate_2d is not None:
+        cmp = compare_model(res, load_unit_model(surrogate_2d, **dict(unit_model or {})))
+    ds = stiffness_dataset(
+        res, delta_deg=float(st["delta_deg"]), h_mm=float(unit.h), chain_units=int(st["chain_units"]), model=cmp
+    )
+    write_dataset(
+        ds,
+        nc_path,
+        rule=rule,
+        config_slice=config_slice if config_slice is not None else dict(actuator),
+        title="Bending stiffness of a PNA unit inside a chain vs both chamber pressures (FEA) and the unit model's",
+        source="workflow.fem (2D chain cut at gap centres: free, blocked, end rotations +-delta per unit)",
+    )
+    plot_unit_stiffness(ds, plot_path)
     return ds

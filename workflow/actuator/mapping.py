@@ -17,6 +17,12 @@ No answer, with a reason, when
 * the 3D angle is not reached before the 2D grid ends (``outside_2d_grid``):
   the 2D surrogate would only extrapolate beyond it.
 A 3D pair beyond the 3D sweep is mapped but flagged (``in_3d_grid`` false).
+
+Under load (``m_ext_nm``, beyond the paper). The free-angle map matches the two units with nothing attached; in an
+actuator each unit bends against the moment its neighbours and the finger put on it, and at the mapped pressures the
+2D unit can be much weaker than the 3D one. With the moment M a unit is expected to carry, the same scale search
+matches the angles under that moment, theta_2D(s P, M) = theta_3D(P, M) (the unit model's spring,
+`workflow.actuator.unit_model`); the callables then take (P_T, P_B, M). M = 0 is the free-angle map.
 """
 
 from __future__ import annotations
@@ -53,11 +59,15 @@ def map_pairs(
     n_grid: int = 201,
     xtol: float = 1e-9,
     equal_tol_kpa: float = 1e-6,
+    m_ext_nm=None,
 ) -> dict[str, np.ndarray]:
     """Map 3D pressure pairs (kPa, any matching shapes) to 2D pairs of the same ratio and angle.
 
     ``angle_3d`` and ``angle_2d`` are vectorised callables (P_T, P_B) -> free
-    angle per unit (deg), e.g. fitted surrogates' ``angle_deg``.  Returns arrays
+    angle per unit (deg), e.g. fitted surrogates' ``angle_deg``; with ``m_ext_nm``
+    (N m per unit, broadcast to the pairs) callables (P_T, P_B, M) -> angle under
+    that end moment, e.g. `UnitModel.angle_deg`, and the angles are matched under
+    it.  Returns arrays
     of the input shape: ``scale``, ``p_top_2d_kpa``, ``p_bottom_2d_kpa``,
     ``angle_3d_deg``, ``angle_2d_deg`` (2D angle at the mapped pair), ``status``
     (`MAPPING_STATUS`) and ``in_3d_grid``.
@@ -65,16 +75,24 @@ def map_pairs(
     pt, pb = np.broadcast_arrays(np.asarray(p_top_3d_kpa, float), np.asarray(p_bottom_3d_kpa, float))
     shape = pt.shape
     pt, pb = pt.ravel(), pb.ravel()
-    th3 = np.asarray(angle_3d(pt, pb), float).ravel()
+    loaded = m_ext_nm is not None
+    m = np.broadcast_to(np.asarray(m_ext_nm if loaded else 0.0, float), shape).ravel()
+
+    def angle_2d_at(i):
+        """The 2D angle as a function of (P_T, P_B) for pair i (under its moment when loaded)."""
+        return (lambda t, b: angle_2d(t, b, m[i])) if loaded else angle_2d
+
+    th3 = np.asarray(angle_3d(pt, pb, m) if loaded else angle_3d(pt, pb), float).ravel()
     scale = np.full(pt.size, np.nan)
     status = np.zeros(pt.size, dtype=np.int32)
     equal = np.abs(pt - pb) <= equal_tol_kpa
     status[equal] = 1
     frac = np.linspace(0.0, 1.0, n_grid)
     for i in np.flatnonzero(~equal):
+        a2 = angle_2d_at(i)
         s_max = p_max_2d_kpa / max(pt[i], pb[i])
         s = frac * s_max
-        g_grid = np.asarray(angle_2d(s * pt[i], s * pb[i]), float).ravel() - th3[i]
+        g_grid = np.asarray(a2(s * pt[i], s * pb[i]), float).ravel() - th3[i]
         sign = np.sign(g_grid)
         idx = np.flatnonzero(sign[:-1] * sign[1:] <= 0)
         if idx.size == 0:
@@ -87,15 +105,16 @@ def map_pairs(
             scale[i] = s[j + 1]
         else:
 
-            def g(x, i=i):
-                return float(np.asarray(angle_2d(np.array([x * pt[i]]), np.array([x * pb[i]]))).ravel()[0] - th3[i])
+            def g(x, i=i, a2=a2):
+                return float(np.asarray(a2(np.array([x * pt[i]]), np.array([x * pb[i]]))).ravel()[0] - th3[i])
 
             scale[i] = brentq(g, s[j], s[j + 1], xtol=xtol)
     p2t, p2b = scale * pt, scale * pb
     ok = np.isfinite(scale)
     th2 = np.full(pt.size, np.nan)
     if ok.any():
-        th2[ok] = np.asarray(angle_2d(p2t[ok], p2b[ok]), float).ravel()
+        args = (p2t[ok], p2b[ok], m[ok]) if loaded else (p2t[ok], p2b[ok])
+        th2[ok] = np.asarray(angle_2d(*args), float).ravel()
     out = {
         "scale": scale,
         "p_top_2d_kpa": p2t,

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-__all__ = ["plot_response", "plot_mapping", "plot_surrogate_cv", "plot_moment_check"]
+__all__ = ["plot_response", "plot_mapping", "plot_surrogate_cv", "plot_moment_check", "plot_unit_stiffness"]
 
 
 def _save(fig, out: str | Path) -> None:
@@ -155,6 +155,37 @@ def plot_moment_check(ds: xr.Dataset, out: str | Path) -> Path:
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
     fig.suptitle("A unit inside a chain under an end moment vs the unit model's spring per end hold", fontsize=9)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_unit_stiffness(ds: xr.Dataset, out: str | Path) -> Path:
+    """Bending stiffness of a unit inside the chain (FEA) and the unit model's, per pressure pair."""
+    labels = [f"({a:g}, {b:g})" for a, b in zip(ds["p_top_kpa"].values, ds["p_bottom_kpa"].values)]
+    x = np.arange(len(labels))
+    diag = ds["p_top_kpa"].values == ds["p_bottom_kpa"].values
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.9 * len(labels) + 2), 3.8))
+    w = 0.38
+    k = ds["k_nm_per_deg"].values * 1e3
+    ax.bar(x - w / 2, k, w, color=np.where(diag, "C0", "C2"), label="FEA: middle unit of the chain")
+    if "k_model_nm_per_deg" in ds:
+        ax.bar(x + w / 2, ds["k_model_nm_per_deg"].values * 1e3, w, color="C1", alpha=0.8, label="unit model")
+    for i in np.flatnonzero(~np.isfinite(k)):
+        ax.text(x[i] - w / 2, 0.0, "failed", rotation=90, ha="center", va="bottom", fontsize=7)
+    ax.set_xticks(x, labels, rotation=30, fontsize=8)
+    ax.set_xlabel("(P_T, P_B) kPa (blue: on the diagonal P_T = P_B)")
+    ax.set_ylabel("bending stiffness per unit (N mm / deg)")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7)
+    ax.set_title(
+        f"Unit stiffness at prescribed end rotations of +-{ds.attrs['delta_deg']:g} deg per unit "
+        f"(chain of {ds.attrs['chain_units']}, h = {ds.attrs['h_mm']:g} mm)",
+        fontsize=9,
+    )
     fig.tight_layout()
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -32,12 +32,16 @@ def pressures_2d(
     p_max_2d_kpa: float,
     p_max_3d_kpa: float = np.inf,
     limit: PressureLimit | None = None,
+    m_ext_nm: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """2D pressures (..., 2) for 3D pairs ``p3`` (..., 2: top, bottom) in kPa, and the mapping flag per pair.
 
     Without surrogates (``angle_3d`` is None) the pressures are returned
     unchanged (flag 3).  Every pressure returned is at most ``p_max_2d_kpa``
     and ``limit`` (:func:`applied_limit`); a pair cut back to that is flag 4.
+    With ``m_ext_nm`` (N m per unit, shape ``p3.shape[:-1]``) the angles are
+    matched under that end moment, and ``angle_3d``/``angle_2d`` take
+    (P_T, P_B, M) (`UnitModel.angle_deg`; see `workflow.actuator.mapping`).
     """
     p3 = np.asarray(p3, float)
     limit = smallest(limit, PressureLimit(float(p_max_2d_kpa), "the 2D pressure range"))
@@ -45,7 +49,15 @@ def pressures_2d(
         p2, flag = p3.copy(), np.full(p3.shape[:-1], 3, dtype=np.int8)
     else:
         p_edge = limit.kpa  # the search stays inside the limit: "not reached" rather than a pair beyond it
-        r = map_pairs(p3[..., 0], p3[..., 1], angle_3d, angle_2d, p_max_2d_kpa=p_edge, p_max_3d_kpa=p_max_3d_kpa)
+        r = map_pairs(
+            p3[..., 0],
+            p3[..., 1],
+            angle_3d,
+            angle_2d,
+            p_max_2d_kpa=p_edge,
+            p_max_3d_kpa=p_max_3d_kpa,
+            m_ext_nm=m_ext_nm,
+        )
         p2 = np.stack([r["p_top_2d_kpa"], r["p_bottom_2d_kpa"]], axis=-1)
         flag = np.zeros(p3.shape[:-1], dtype=np.int8)
         eq = r["status"] == 1

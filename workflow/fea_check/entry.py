@@ -18,7 +18,7 @@ from workflow.actuator.pressure_limit import material_limit
 from workflow.actuator.unit_model import load_unit_model
 from workflow.cascade.finger import Finger
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
-from workflow.common.constants import JOINTS
+from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
 from workflow.common.vtu import write_vtu
 from workflow.fea_check.applied import applied_limit
@@ -131,6 +131,16 @@ def write_fea_check(
         ro_plan = patient_cascade(
             finger, load_unit_model(units[cascade_cfg.get("surrogate", "3d")], **unit_model_cfg), cascade_cfg, upg
         )
+    # the 2D pressures: the paper's free-angle map, or the angles matched under the moment each unit carries
+    m_units = None
+    if a3 is not None and fea_cfg.get("pressure_map", "free_angle") == "loaded":
+        if unit_model_cfg is None:
+            raise ValueError("fea_check.pressure_map = loaded needs the unit model (surrogates.unit_model)")
+        a3 = load_unit_model(surrogate_3d, **unit_model_cfg).angle_deg
+        a2 = load_unit_model(surrogate_2d, **unit_model_cfg).angle_deg
+        ex = list(fea_cfg.get("exercises") or plan["exercise"].values)
+        m_units = plan["unit_moment_nm"].sel(exercise=ex, group=list(GROUPS)).values
+        log.info("2D pressures matched under the plan's unit moments (fea_check.pressure_map = loaded)")
     material = material_limit(actuator_cfg.get("material"))
     limit_plan = plan_limit(cascade_cfg, None if ro_plan is None else ro_plan.unit, material)
     limit_2d = applied_limit(actuator_cfg, pm2)
@@ -157,6 +167,7 @@ def write_fea_check(
         correction=fea_cfg.get("correction"),
         plan_opts=plan_opts,
         limit_2d=limit_2d,
+        unit_moments_nm=m_units,
         notes={
             "patient": patient_name,
             "springs": spring_note,
@@ -164,7 +175,11 @@ def write_fea_check(
             "p_limit_source": limit_2d.source,
             "p_limit_plan_kpa": limit_plan.kpa,
             "p_limit_plan_source": limit_plan.source,
-            "pressures": "2D-to-3D mapped" if a3 is not None else "plan's, unchanged",
+            "pressures": (
+                ("2D-to-3D mapped under the plan's unit moments" if m_units is not None else "2D-to-3D mapped")
+                if a3 is not None
+                else "plan's, unchanged"
+            ),
             "h_actuator_mm": float(fea_cfg.get("h_actuator_mm", 2.0)),
             **dict(notes or {}),
         },

@@ -275,9 +275,14 @@ def run_fea_check(
     correction: Mapping | None = None,
     plan_opts: Mapping | None = None,
     limit_2d: PressureLimit | None = None,
+    unit_moments_nm: np.ndarray | None = None,
     notes: Mapping[str, Any] | None = None,
 ):
     """Gravity state, then every exercise -> (dataset, checks, gravity result, corrections).
+
+    ``unit_moments_nm`` (exercise, group; N m per unit): the moment each group's unit carries in the plan; given,
+    the 2D pressures match the angles under it (``angle_3d``/``angle_2d`` then take (P_T, P_B, M)), else the free
+    angles (the paper's map, Fig. 17).
 
     ``limit_2d`` (:func:`applied_limit`) bounds every pressure applied, the
     correction step's too.
@@ -291,9 +296,11 @@ def run_fea_check(
     ex = [str(e) for e in plan["exercise"].values] if not exercises else [str(e) for e in exercises]
     p_plan = plan["pressure_kpa"].sel(exercise=ex, group=list(GROUPS), chamber=list(CHAMBERS)).values
 
-    def to_2d(p3):
+    m_units = None if unit_moments_nm is None else np.asarray(unit_moments_nm, float)
+
+    def to_2d(p3, m=m_units):
         return pressures_2d(
-            p3, angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa, limit=limit_2d
+            p3, angle_3d, angle_2d, p_max_2d_kpa=p_max_2d_kpa, p_max_3d_kpa=p_max_3d_kpa, limit=limit_2d, m_ext_nm=m
         )
 
     p2, flag = to_2d(p_plan)
@@ -356,7 +363,7 @@ def run_fea_check(
                     p_plan[i],
                     plan["predicted_angle_deg"].sel(exercise=name).values,
                     c,
-                    to_2d=lambda p3: to_2d(p3)[0],
+                    to_2d=lambda p3, i=i: to_2d(p3, None if m_units is None else m_units[i])[0],
                     solver=solver,
                     gravity=grav,
                     tolerance_deg=tolerance_deg,

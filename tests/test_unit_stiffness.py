@@ -1,0 +1,81 @@
+"""A unit's bending stiffness inside a chain, at prescribed end rotations (workflow/actuator/stiffness.py).
+
+Coarse 2D chain of three chambers (h = 2 mm, no contact): a second or two per solve.
+"""
+
+import numpy as np
+import pytest
+
+from workflow import fem
+from workflow.actuator.stiffness import SOLVES, chain_mesh, compare_model, rotation_stiffness, stiffness_dataset
+from workflow.actuator.unit_model import UnitModel
+
+J = {name: k for k, (name, _, _) in enumerate(SOLVES)}
+
+
+@pytest.fixture(scope="module")
+def chain():
+    return chain_mesh(fem.build_unit_mesh(None, h=2.0, dim=2), chain_units=3)
+
+
+@pytest.fixture(scope="module")
+def study(chain):
+    pairs = [[0.0, 0.0], [50.0, 50.0], [20.0, 0.0]]
+    return rotation_stiffness(chain, pairs, delta_deg=1.0, solve_kwargs={"contact": False})
+
+
+def test_every_solve_converges(study):
+    assert (study["status"] == 0).all() and np.allclose(study["load_factor"], 1.0)
+
+
+def test_co_pressurised_chain_is_mirror_symmetric(study):
+    # P_T = P_B: no free angle, no blocked moment, and the moment-angle curve odd about the blocked state;
+    # a top/bottom asymmetry (pressure on one side only, a sign error in the hold) breaks this
+    m, th = study["moment_nm"][1], study["mid_angle_deg"][1]
+    scale = abs(m[J["plus"]])
+    assert abs(th[J["free"]]) < 1e-9 and abs(m[J["blocked"]]) < 1e-9 * scale
+    assert m[J["plus"]] == pytest.approx(-m[J["minus"]], rel=1e-8)
+    assert th[J["plus"]] == pytest.approx(-th[J["minus"]], rel=1e-8)
+    assert m[J["plus"]] < 0 < th[J["plus"]]  # rotating further in the P_T sense takes a negative couple
+
+
+def test_moment_is_straight_about_the_blocked_state_at_small_pressure(study):
+    # 20 kPa on one side, no contact: M is linear in the rotation about the blocked state, so the blocked
+    # moment is the mean of the two held rotations' (second difference under 1 % of the change)
+    m = study["moment_nm"][2]
+    assert m[J["minus"]] > m[J["blocked"]] > m[J["plus"]]
+    assert abs(m[J["plus"]] + m[J["minus"]] - 2 * m[J["blocked"]]) < 0.01 * (m[J["minus"]] - m[J["plus"]])
+
+
+def test_co_pressurising_stiffens_the_unit(study):
+    # both chambers at 50 kPa make an interior unit stiffer than at rest, without contact by 13 % (the walls'
+    # pretension; with contact the pressed walls across the gaps add far more, see docs/actuator.md)
+    k = study["k_nm_per_deg"]
+    assert np.all(k > 0) and k[1] > 1.08 * k[0]
+
+
+def test_model_comparison_and_dataset(study):
+    # a unit model whose secant is the FEA's everywhere has no error; the dataset carries both
+    k_fea = dict(zip(map(tuple, study["pairs_kpa"]), study["k_nm_per_deg"]))
+
+    def angle(pt, pb):
+        return np.asarray(pt, float) - np.asarray(pb, float) + 0.0
+
+    def moment(pt, pb):
+        pt, pb = np.broadcast_arrays(np.asarray(pt, float), np.asarray(pb, float))
+        return np.array([k_fea.get((a, b), 0.0) for a, b in zip(pt.ravel(), pb.ravel())]).reshape(pt.shape) * angle(
+            pt, pb
+        )
+
+    cmp = compare_model(study, UnitModel(angle, moment))
+    assert cmp["k_model_rel_error"][2] == pytest.approx(0.0, abs=1e-12)
+    ds = stiffness_dataset(study, delta_deg=1.0, h_mm=2.0, chain_units=3, model=cmp)
+    assert ds.sizes == {"pair": 3, "solve": len(SOLVES)}
+    assert ds["k_nm_per_deg"].attrs["units"] == "N m / degree" and "k_model_rel_error" in ds
+
+
+def test_bad_inputs_are_named(chain):
+    with pytest.raises(ValueError, match="delta_deg"):
+        rotation_stiffness(chain, [[0.0, 0.0]], delta_deg=0.0)
+    with pytest.raises(ValueError, match="chain cut at gap centres"):
+        rotation_stiffness(fem.build_unit_mesh(None, h=2.0, dim=2), [[0.0, 0.0]])

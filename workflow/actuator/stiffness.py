@@ -1,0 +1,185 @@
+"""A unit's bending stiffness as a function of both chamber pressures, by FEA at prescribed end rotations.
+
+The unit model (`workflow.actuator.unit_model`) joins a unit's free angle theta_f(P) and blocked moment M_b(P) by a
+spring of stiffness k = M_b / theta_f (the secant). On the diagonal P_T = P_B both vanish and the secant is 0/0: the
+model then takes the secant at a nearby pair, an estimate nobody had measured. That is where the paper's plans hold a
+group (Table 8's DIP group at P_T = P_B), so it matters what co-pressurising does.
+
+The reference is the one the end hold was chosen against (`workflow.actuator.moment_check`): a unit inside a longer
+actuator, the middle unit of a chain of ``chain_units`` chambers cut at gap centres. The chain's end is held at
+end rotations of +delta and -delta per unit (total n * delta) about the blocked state; the end couple M is the
+moment every unit carries, and the middle unit's backbone rotation theta_mid its response:
+
+    k(P) = (M(-delta) - M(+delta)) / (theta_mid(+delta) - theta_mid(-delta))     (N m per degree, per unit)
+
+M is positive in the sense of P_T bending, so it falls as the end is rotated further that way. Angles in degrees
+per unit, moments in N m for the full actuator width, pressures in kPa.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+from workflow import fem
+from workflow.actuator.moment_check import unit_rotations_deg
+from workflow.actuator.unit_model import UnitModel
+from workflow.common.constants import SOLVER_STATUS
+
+__all__ = ["DEFAULT_STIFFNESS", "SOLVES", "chain_mesh", "compare_model", "rotation_stiffness", "stiffness_dataset"]
+
+log = logging.getLogger(__name__)
+
+#: Points of the study (config ``actuator.stiffness``).
+DEFAULT_STIFFNESS = {
+    "delta_deg": 3.0,  # chain end rotation per unit on either side of the blocked state
+    "chain_units": 5,
+    "pairs_kpa": [[0.0, 0.0], [100.0, 100.0], [200.0, 200.0], [300.0, 300.0], [150.0, 0.0], [300.0, 150.0]],
+}
+
+#: The solves per pressure pair, in order: (name, unit-model case, end rotation in units of delta).
+SOLVES = (("free", "free", 0.0), ("blocked", "blocked", 0.0), ("plus", "rotation", 1.0), ("minus", "rotation", -1.0))
+
+
+def chain_mesh(unit: fem.UnitMesh, chain_units: int = 5, **layers) -> fem.UnitMesh:
+    """The chain of ``chain_units`` chambers, cut at gap centres, on the unit's geometry and element size."""
+    geom = dict(unit.geometry, n_chambers=int(chain_units))
+    return fem.build_unit_mesh(geom, h=unit.h, dim=unit.dim, end_gaps=True, **layers)
+
+
+def rotation_stiffness(
+    chain: fem.UnitMesh,
+    pairs_kpa: Sequence[Sequence[float]],
+    *,
+    delta_deg: float = 3.0,
+    actuator: Mapping | None = None,
+    solve_kwargs: Mapping | None = None,
+) -> dict[str, np.ndarray]:
+    """FEA of the chain at each pressure pair: free, blocked and end rotations of +-``delta_deg`` per unit.
+
+    ``chain``: a `chain_mesh` (cut at gap centres, so its ends are the backbone alone). With ``actuator`` (the
+    config section) every solve takes its material, contact, solver and restarts
+    (`workflow.fem.solve_unit_from_config`); without it `workflow.fem.solve_unit` with ``solve_kwargs``. Returns
+    arrays over (pair, solve) of ``status``, ``load_factor``, ``moment_nm``, ``mid_angle_deg`` (the middle unit's
+    rotation), ``wall_time_s``, and over pair ``k_nm_per_deg`` (NaN unless both rotations converged).
+    """
+    if not delta_deg > 0:
+        raise ValueError(f"delta_deg = {delta_deg}: must be > 0")
+    if not chain.end_gaps:
+        raise ValueError("rotation_stiffness needs a chain cut at gap centres (chain_mesh), not the unit model")
+    kw = dict(solve_kwargs or {})
+    n = int(chain.geometry["n_chambers"])
+    P = np.asarray(pairs_kpa, float).reshape(-1, 2)
+    shape = (len(P), len(SOLVES))
+    out = {k: np.full(shape, np.nan) for k in ("load_factor", "moment_nm", "mid_angle_deg", "wall_time_s")}
+    out["status"] = np.full(shape, -1, dtype=np.int8)
+    for i, (pt, pb) in enumerate(P):
+        for j, (name, case, sign) in enumerate(SOLVES):
+            t0 = time.perf_counter()
+            common = {"end_angle_deg": sign * delta_deg * n, "keep_displacement": True}
+            if actuator is not None:
+                r = fem.solve_unit_from_config(actuator, chain.dim, pt, pb, case, mesh=chain, **common, **kw)
+            else:
+                r = fem.solve_unit(chain, pt, pb, case=case, **common, **kw)
+            out["status"][i, j] = r.status
+            out["load_factor"][i, j] = r.load_factor
+            out["mid_angle_deg"][i, j] = unit_rotations_deg(chain, r.displacement)[n // 2]
+            out["moment_nm"][i, j] = 0.0 if case == "free" else r.bending_moment_nm
+            out["wall_time_s"][i, j] = time.perf_counter() - t0
+            log.info(
+                "stiffness: P = (%g, %g) kPa, %s: status %d at %.3f of the load, middle unit %.3f deg, M %.5f N m, "
+                "%.1f s",
+                pt,
+                pb,
+                name,
+                r.status,
+                r.load_factor,
+                out["mid_angle_deg"][i, j],
+                out["moment_nm"][i, j],
+                out["wall_time_s"][i, j],
+            )
+    j = {name: k for k, (name, _, _) in enumerate(SOLVES)}
+    both = (out["status"][:, j["plus"]] == 0) & (out["status"][:, j["minus"]] == 0)
+    dth = out["mid_angle_deg"][:, j["plus"]] - out["mid_angle_deg"][:, j["minus"]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = (out["moment_nm"][:, j["minus"]] - out["moment_nm"][:, j["plus"]]) / dth
+    out["k_nm_per_deg"] = np.where(both & (dth > 0), k, np.nan)
+    out["pairs_kpa"] = P
+    return out
+
+
+def compare_model(res: Mapping[str, np.ndarray], model: UnitModel) -> dict[str, np.ndarray]:
+    """The unit model's stiffness (its secant, or the offset estimate near P_T = P_B) at the study's pairs, and its
+    error against the FEA as a share of the FEA's value."""
+    P = np.asarray(res["pairs_kpa"])
+    k_model = np.asarray(model.stiffness_nm_per_deg(P[:, 0], P[:, 1]), float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = k_model / res["k_nm_per_deg"] - 1.0
+    return {"k_model_nm_per_deg": k_model, "k_model_rel_error": rel}
+
+
+def stiffness_dataset(
+    res: Mapping[str, np.ndarray],
+    *,
+    delta_deg: float,
+    h_mm: float,
+    chain_units: int,
+    model: Mapping[str, np.ndarray] | None = None,
+) -> xr.Dataset:
+    """``unit_stiffness.nc`` content from :func:`rotation_stiffness` (and :func:`compare_model`), no provenance."""
+    P = np.asarray(res["pairs_kpa"])
+    dims = ("pair", "solve")
+    flag_vals = np.array(sorted(SOLVER_STATUS), dtype="i1")
+    ds = xr.Dataset(
+        {
+            "p_top_kpa": ("pair", P[:, 0], {"units": "kPa", "long_name": "top chamber pressure"}),
+            "p_bottom_kpa": ("pair", P[:, 1], {"units": "kPa", "long_name": "bottom chamber pressure"}),
+            "mid_angle_deg": (
+                dims,
+                res["mid_angle_deg"],
+                {"units": "degree", "long_name": "backbone rotation of the chain's middle unit"},
+            ),
+            "moment_nm": (dims, res["moment_nm"], {"units": "N m", "long_name": "end couple per unit (0 when free)"}),
+            "status": (
+                dims,
+                res["status"],
+                {
+                    "units": "1",
+                    "long_name": "solver status",
+                    "flag_values": flag_vals,
+                    "flag_meanings": " ".join(SOLVER_STATUS[int(v)] for v in flag_vals),
+                },
+            ),
+            "load_factor": (dims, res["load_factor"], {"units": "1", "long_name": "share of the load reached"}),
+            "wall_time_s": (dims, res["wall_time_s"], {"units": "s", "long_name": "wall time of the solve"}),
+            "k_nm_per_deg": (
+                "pair",
+                res["k_nm_per_deg"],
+                {"units": "N m / degree", "long_name": "bending stiffness of a unit inside the chain (FEA)"},
+            ),
+        },
+        coords={"solve": [s[0] for s in SOLVES]},
+    )
+    if model is not None:
+        ds["k_model_nm_per_deg"] = (
+            "pair",
+            model["k_model_nm_per_deg"],
+            {"units": "N m / degree", "long_name": "unit model's stiffness (secant; offset estimate near P_T = P_B)"},
+        )
+        ds["k_model_rel_error"] = (
+            "pair",
+            model["k_model_rel_error"],
+            {"units": "1", "long_name": "unit model's stiffness / FEA's - 1"},
+        )
+    ds.attrs.update(
+        delta_deg=float(delta_deg),
+        h_mm=float(h_mm),
+        chain_units=int(chain_units),
+        method="k = (M(-delta) - M(+delta)) / (theta_mid(+delta) - theta_mid(-delta)), chain end held at "
+        "+-delta per unit, theta_mid the middle unit's rotation",
+    )
+    return ds
