@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from _doubles import DENSITIES, mean_finger
 
-from workflow.cascade import entry, kinematics, planning
+from workflow.cascade import entry, kinematics, planning, stiffness
 from workflow.cascade import finger as F
 from workflow.cascade import model as C
 
@@ -38,6 +38,9 @@ class LinearUnit:
 
     def angle_deg(self, pt, pb, m):
         return self.free_angle_deg(pt, pb) - np.asarray(m, float) / self.stiffness(pt, pb)
+
+    def stiffness_nm_per_deg(self, pt, pb):
+        return self.stiffness(pt, pb)
 
 
 def springs():
@@ -146,6 +149,30 @@ def test_inverse_plan_reaches_a_reachable_target():
     tight = planning.plan_exercise(m, target, tol_deg=1.0, active_limits_nm=LIMITS)
     assert tight.achieved and np.max(np.abs(tight.equilibrium.joint_angles_deg - target)) <= 1.0
     assert tight.pressures_kpa @ tight.pressures_kpa > plan.pressures_kpa @ plan.pressures_kpa
+
+
+def test_stiffness_planner_co_pressurises_to_hold_the_pose_stiffer():
+    # the double's unit stiffens with P_T + P_B: the least-pressure plan never co-pressurises; asked for spans
+    # stiffer than their load, the stiffness planner does, at the same pose within the tolerance
+    m = model()
+    target = C.solve_equilibrium(m, np.array([120, 0, 120, 0, 100, 0, 0, 40], float)).joint_angles_deg
+    least = planning.plan_exercise(m, target, tol_deg=5.0, active_limits_nm=LIMITS)
+    k_least = [stiffness.span_stiffness_nm_per_deg(m, j, least.pressures_kpa)[0] for j in range(3)]
+    load = stiffness.load_stiffness_nm_per_deg(m, np.asarray(target))
+    margin = 1.5 * max(k / lo for k, lo in zip(k_least, load))  # more than the least-pressure plan gives anywhere
+    stiff = planning.plan_exercise(
+        m, target, tol_deg=5.0, active_limits_nm=LIMITS, planner="stiffness", stiffness_margin=margin
+    )
+    assert least.achieved and stiff.achieved, (least.reason, stiff.reason)
+    co = np.minimum(least.pressures_kpa[0::2], least.pressures_kpa[1::2])
+    assert np.all(co == 0)  # least pressure: one chamber of a group at most
+    assert np.any(np.minimum(stiff.pressures_kpa[0::2], stiff.pressures_kpa[1::2]) > 0)  # co-pressurised
+    k_stiff = [stiffness.span_stiffness_nm_per_deg(m, j, stiff.pressures_kpa)[0] for j in range(3)]
+    assert all(ks > kl for ks, kl in zip(k_stiff, k_least))
+    assert np.max(np.abs(stiff.equilibrium.joint_angles_deg - target)) <= 5.0
+    assert stiff.pressures_kpa.max() <= 300.0
+    with pytest.raises(ValueError, match="planner"):
+        planning.plan_exercise(m, target, planner="stiffest")
 
 
 def test_unreachable_target_is_marked_with_a_reason():

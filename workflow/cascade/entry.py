@@ -106,6 +106,8 @@ def write_cascade_plan(
             "planning_wall_time_s": round(time.perf_counter() - t0, 3),
             "p_limit_kpa": limit.kpa,
             "p_limit_source": limit.source,
+            "planner": str(c.get("planner", "least_pressure")),
+            "stiffness_margin": float(c.get("stiffness_margin", 1.0)),
             **dict(notes or {}),
         },
     )

@@ -9,6 +9,15 @@ forward model then checks the pose, the angle tolerance and the active safety
 limits (``|m_X| <= limit_X``), halving the span goal when the pose drifts out.
 ``P_CMC`` may be tied to ``P_MCP`` as in all the paper's plans.
 
+Which of the pressures that bend a span within the goal a plan takes is the planner's choice (``planner``):
+
+* ``least_pressure``: the least sum of squares (the default);
+* ``stiffness``: the least sum of squares among those whose span holds the pose with a stiffness margin s: the span's
+  rotational stiffness (its units in series, k_span = 1 / sum_g n_g / k_g(P), N m per degree of span bend, from the
+  unit model) at least s times the load's, |d m*_X / d theta_X| (the joint spring less gravity, by central
+  differences at the target pose). Where no pressures reach that, the stiffest of those that bend the span right.
+  Co-pressurising both chambers of a group raises k_g at the same bend, which the least-pressure rule never does.
+
 Pressures kPa, angles deg, moments N m.
 """
 
@@ -29,9 +38,13 @@ from workflow.cascade.model import (
     pressures_table,
     solve_equilibrium,
 )
+from workflow.cascade.stiffness import load_stiffness_nm_per_deg, span_stiffness_nm_per_deg
 from workflow.common.constants import CASCADE_EQUILIBRIUM_STATUS, CHAMBERS, GROUPS, JOINTS, PRESSURE_NAMES
 
-__all__ = ["Plan", "plan_exercise", "plan_patient", "plans_dataset"]
+__all__ = ["PLANNERS", "Plan", "plan_exercise", "plan_patient", "plans_dataset"]
+
+#: The planners of the module docstring.
+PLANNERS = ("least_pressure", "stiffness")
 
 
 # --------------------------------------------------------------------------
@@ -57,14 +70,24 @@ class Plan:
 
 
 def _span_plan(
-    model, joint: int, m_req: float, target: float, goal: float, p_max: float, tie: bool, n_coarse: int = 61
+    model,
+    joint: int,
+    m_req: float,
+    target: float,
+    goal: float,
+    p_max: float,
+    tie: bool,
+    n_coarse: int = 61,
+    k_required: float | None = None,
 ) -> tuple[dict[int, float], float]:
     """Least-squares pressures of one span by grid search (no gradients, so a
     piecewise-constant surrogate such as KNN works too).
 
     Returns {index into the eight pressures: kPa} and the bend error (deg) at
     the target pose.  Feasible: the least sum of squares with
-    ``|bend - target| <= goal``; otherwise the pressures closest to the target.
+    ``|bend - target| <= goal`` (and, with ``k_required`` in N m/deg, a span
+    stiffness of at least that, else the stiffest feasible); otherwise the
+    pressures closest to the target.
     """
     groups = [GROUPS.index(g) for g in SPANS[JOINTS[joint]]]
     idx = [2 * g + c for g in groups for c in (0, 1)]
@@ -74,11 +97,15 @@ def _span_plan(
     counts = model.span_counts()[joint]
     comp = np.rad2deg(_strap_compliance(model)[joint] * m_req)
 
-    def bend(P):  # P (n, k) kPa -> span bend error (n,)
+    def full(P):  # P (n, k) kPa -> the eight pressures (n, 8)
         p8 = np.zeros((P.shape[0], 8))
         p8[:, idx] = P
         if tie and joint == 0:
             p8[:, 0:2] = p8[:, 2:4]
+        return p8
+
+    def bend(P):  # P (n, k) kPa -> span bend error (n,)
+        p8 = full(P)
         out = np.full(P.shape[0], comp - target)
         for g in range(4):
             if counts[g]:
@@ -91,6 +118,15 @@ def _span_plan(
         P = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, k)
         e = bend(P)
         ok = np.abs(e) <= goal
+        if np.any(ok) and k_required is not None:
+            ks = span_stiffness_nm_per_deg(model, joint, full(P[ok]))
+            stiff = ks >= k_required
+            if np.any(stiff):
+                cand = np.flatnonzero(ok)[stiff]
+                i = cand[np.argmin(np.sum(P[cand] ** 2, axis=1))]
+            else:
+                i = np.flatnonzero(ok)[np.argmax(ks)]
+            return P[i], float(e[i]), True
         if np.any(ok):
             i = np.flatnonzero(ok)[np.argmin(np.sum(P[ok] ** 2, axis=1))]
             return P[i], float(e[i]), True
@@ -119,6 +155,8 @@ def plan_exercise(
     tie_cmc_mcp: bool = True,
     margin_deg: float = 0.25,
     max_rounds: int = 5,
+    planner: str = "least_pressure",
+    stiffness_margin: float = 1.0,
 ) -> Plan:
     """Pressures for one exercise (see the module docstring).
 
@@ -128,8 +166,11 @@ def plan_exercise(
     tolerance (the pose, not the target, sets the moments), the plan is
     repeated -- with the moments of the reached pose for spans that cannot
     reach their target, else with half the span goal -- at most ``max_rounds``
-    times, and the best round is kept.  Angles deg, moments N m, pressures kPa.
+    times, and the best round is kept.  ``planner`` and ``stiffness_margin``:
+    see the module docstring.  Angles deg, moments N m, pressures kPa.
     """
+    if planner not in PLANNERS:
+        raise ValueError(f"planner {planner!r}: one of {PLANNERS}")
     target = np.asarray(target_deg, float)
     limits = None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float))
     m_req, *_ = _required_moments(model, target)
@@ -139,12 +180,17 @@ def plan_exercise(
     # puts them, so the other spans plan for the moments they will really see.
     theta_eval = target.copy()
     best = None
+    k_req = [None] * 3
+    if planner == "stiffness":
+        k_req = list(stiffness_margin * load_stiffness_nm_per_deg(model, target))
     for _ in range(max_rounds):
         m_eval, *_ = _required_moments(model, theta_eval)
         p8 = np.zeros(8)
         span_err = np.zeros(3)
         for j in range(3):
-            sol, span_err[j] = _span_plan(model, j, m_eval[j], target[j], goal, p_max_kpa, tie_cmc_mcp)
+            sol, span_err[j] = _span_plan(
+                model, j, m_eval[j], target[j], goal, p_max_kpa, tie_cmc_mcp, k_required=k_req[j]
+            )
             for i, v in sol.items():
                 p8[i] = v
         if tie_cmc_mcp:
@@ -318,6 +364,11 @@ def plans_dataset(
                 {"units": "1", "long_name": "actuator units per group"},
             ),
             "segment_mass_kg": ("segment", model.finger.masses_kg, {"units": "kg", "long_name": "phalanx mass"}),
+            "load_stiffness_nm_per_deg": (
+                ("exercise", "joint"),
+                np.array([load_stiffness_nm_per_deg(model, p.target_deg) for p in plans]),
+                {"units": "N m / degree", "long_name": "|d required moment / d joint angle| at the target pose"},
+            ),
         },
         coords={
             "exercise": ex,
@@ -328,6 +379,12 @@ def plans_dataset(
             "segment": ["PP", "MP", "DP"],
         },
     )
+    if hasattr(model.unit, "stiffness_nm_per_deg"):
+        ds["span_stiffness_nm_per_deg"] = (
+            ("exercise", "joint"),
+            np.array([[span_stiffness_nm_per_deg(model, j, p.pressures_kpa)[0] for j in range(3)] for p in plans]),
+            {"units": "N m / degree", "long_name": "rotational stiffness of each joint's span of units (unit model)"},
+        )
     ds.attrs.update(
         {
             "unit_mass_kg": model.unit_mass_kg,
