@@ -142,6 +142,21 @@ def test_zero_pressure_leaves_the_actuator_straight_and_equal_pressures_do_not_b
     assert rt.status == 0 and rt.tip_angle_deg > 5.0 and rt.backbone_mm[-1, 1] < 0
 
 
+def test_tip_force_bends_the_actuator_linearly_against_the_pressure():
+    # no pressure, small tip forces (N for the 20 mm width): deflection along +y, twice the force twice the
+    # deflection (the linear range, within 1 %); with the top chambers pressurised the force holds the bend back
+    um = build_actuator_mesh(None, {"A": 2, "B": 2}, h=2.5)
+    r1 = solve_standalone(um, {}, solver=SOLVER, tip_force_n=0.005)
+    r2 = solve_standalone(um, {}, solver=SOLVER, tip_force_n=0.01)
+    assert r1.status == 0 and r2.status == 0
+    assert r1.backbone_mm[-1, 1] > 0 and r1.tip_angle_deg < 0
+    assert r2.backbone_mm[-1, 1] == pytest.approx(2 * r1.backbone_mm[-1, 1], rel=0.01)
+    # 10 kPa: below the blocks' first corner contact, where these whole-actuator solves still stall
+    free = solve_standalone(um, {"A": (10.0, 0.0), "B": (10.0, 0.0)}, solver=SOLVER)
+    held = solve_standalone(um, {"A": (10.0, 0.0), "B": (10.0, 0.0)}, solver=SOLVER, tip_force_n=0.02)
+    assert free.status == 0 and held.status == 0 and 0 < held.tip_angle_deg < free.tip_angle_deg
+
+
 def test_pressure_mapping_flags():
     p3 = np.array([[[300.0, 0.0], [100.0, 100.0]], [[0.0, 0.0], [290.0, 0.0]]])
     same, flag = pressures_2d(p3, None, None, p_max_2d_kpa=300.0)

@@ -32,9 +32,11 @@ from workflow.fem._unit import (
     material_constants,
     solid_assembler,
 )
+from workflow.fem.finger2d import DeadLoad
 
 __all__ = [
     "group_pressures",
+    "tip_load",
     "actuator_model",
     "backbone_curve",
     "tip_angle_deg",
@@ -57,6 +59,21 @@ def group_pressures(um: UnitMesh, pressures_kpa: Mapping[str, tuple[float, float
     return out
 
 
+def tip_load(um: UnitMesh, force_n: float) -> DeadLoad:
+    """A dead transverse force at the free end, shared equally by the nodes of the end face.
+
+    ``force_n`` (N) is the whole actuator's (20 mm wide): the model carries its share, per mm of width in 2D and
+    half of it on the 3D half model. Positive along +y, against the bending of the top chambers (they bend the
+    actuator towards -y), as a finger's resisting load does. It ramps with the pressures.
+    """
+    p = um.mesh.p
+    end = np.flatnonzero(np.isclose(p[0], p[0].max()))  # on the paper layer's end alone it distorts the layer
+    share = float(force_n) / um.geometry["width"] if um.dim == 2 else 0.5 * float(force_n)
+    f = np.zeros(p.size)
+    f[um.dim * end + 1] = share / end.size
+    return DeadLoad(f, ramp=True)
+
+
 def actuator_model(
     um: UnitMesh,
     pressures_kpa: Mapping[str, tuple[float, float]],
@@ -65,8 +82,10 @@ def actuator_model(
     contact_options: Mapping | None = None,
     contact: bool = True,
     formulation: str = DEFAULT_FORMULATION,
+    tip_force_n: float = 0.0,
 ) -> Model:
-    """Stand-alone whole actuator: clamped hand end, group pressures at load factor 1."""
+    """Stand-alone whole actuator: clamped hand end, group pressures (and a tip force, :func:`tip_load`) at load
+    factor 1."""
     mat = material_constants(material)
     solid = solid_assembler(um.mesh, um.material, mat, formulation)
     dim = um.dim
@@ -82,6 +101,7 @@ def actuator_model(
         contacts=pairs,
         penalty=contact_penalty(mat, copts),
         fixed=np.unique(np.concatenate(fixed)),
+        extras=[tip_load(um, tip_force_n)] if tip_force_n else [],
     )
 
 
@@ -130,11 +150,19 @@ def solve_standalone(
     solver: Mapping | None = None,
     keep_displacement: bool = False,
     formulation: str = DEFAULT_FORMULATION,
+    tip_force_n: float = 0.0,
 ) -> StandaloneResult:
-    """Ramp the group pressures from zero on the clamped actuator; never raises for a failed path."""
+    """Ramp the group pressures (and ``tip_force_n``, N, :func:`tip_load`) from zero on the clamped actuator; never
+    raises for a failed path."""
     t0 = time.perf_counter()
     model = actuator_model(
-        um, pressures_kpa, material=material, contact_options=contact_options, contact=contact, formulation=formulation
+        um,
+        pressures_kpa,
+        material=material,
+        contact_options=contact_options,
+        contact=contact,
+        formulation=formulation,
+        tip_force_n=tip_force_n,
     )
     opts = dict(DEFAULT_SOLVER)
     opts.update(dict(solver or {}))
