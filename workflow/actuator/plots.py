@@ -174,8 +174,11 @@ def plot_unit_stiffness(ds: xr.Dataset, out: str | Path) -> Path:
     ax.bar(x - w / 2, k, w, color=np.where(diag, "C0", "C2"), label="FEA: middle unit of the chain")
     if "k_model_nm_per_deg" in ds:
         ax.bar(x + w / 2, ds["k_model_nm_per_deg"].values * 1e3, w, color="C1", alpha=0.8, label="unit model")
+    solved = np.all(ds["status"].values == 0, axis=1)
     for i in np.flatnonzero(~np.isfinite(k)):
-        ax.text(x[i] - w / 2, 0.0, "failed", rotation=90, ha="center", va="bottom", fontsize=7)
+        # every solve converged but the middle unit did not turn: locked by contact across its gaps
+        label = "locked" if solved[i] else "failed"
+        ax.text(x[i] - w / 2, 0.0, label, rotation=90, ha="center", va="bottom", fontsize=7)
     ax.set_xticks(x, labels, rotation=30, fontsize=8)
     ax.set_xlabel("(P_T, P_B) kPa (blue: on the diagonal P_T = P_B)")
     ax.set_ylabel("bending stiffness per unit (N mm / deg)")
