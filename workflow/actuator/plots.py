@@ -185,9 +185,9 @@ def plot_unit_stiffness(ds: xr.Dataset, out: str | Path) -> Path:
     ax.grid(alpha=0.3, axis="y")
     ax.legend(fontsize=7)
     ax.set_title(
-        f"Unit stiffness at prescribed end rotations of +-{ds.attrs['delta_deg']:g} deg per unit "
-        f"(chain of {ds.attrs['chain_units']}, h = {ds.attrs['h_mm']:g} mm)",
-        fontsize=9,
+        f"Unit stiffness at end rotations of +-{ds.attrs['delta_deg']:g} deg per unit\n"
+        f"(middle unit of a chain of {ds.attrs['chain_units']}, h = {ds.attrs['h_mm']:g} mm)",
+        fontsize=8,
     )
     fig.tight_layout()
     out = Path(out)

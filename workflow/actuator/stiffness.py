@@ -65,7 +65,9 @@ def rotation_stiffness(
     config section) every solve takes its material, contact, solver and restarts
     (`workflow.fem.solve_unit_from_config`); without it `workflow.fem.solve_unit` with ``solve_kwargs``. Returns
     arrays over (pair, solve) of ``status``, ``load_factor``, ``moment_nm``, ``mid_angle_deg`` (the middle unit's
-    rotation), ``wall_time_s``, and over pair ``k_nm_per_deg`` (NaN unless both rotations converged).
+    rotation), ``wall_time_s``, and over pair ``k_nm_per_deg`` (NaN unless both rotations converged and the middle
+    unit turned with the end: at high co-pressure the walls pressed across its gaps can lock it, and the chain's end
+    strips then take the whole rotation).
     """
     if not delta_deg > 0:
         raise ValueError(f"delta_deg = {delta_deg}: must be > 0")
