@@ -239,7 +239,8 @@ def test_snakemake_resumes_a_missing_shard_and_builds_downstream(tmp_path, repo)
         'rule all_test:\n    input: "results/actuator/mapping_2d3d.nc"\n'
     )
     (tmp_path / "resources").mkdir()
-    shutil.copy(repo / "resources" / "table08_planned_pressures_3d.csv", tmp_path / "resources")
+    for table in ("table08_planned_pressures_3d.csv", "table07_unit_targets.csv"):  # the mapping's inputs
+        shutil.copy(repo / "resources" / table, tmp_path / "resources")
     for fea in ("2d", "3d"):
         for i in range(2):
             entry_fem.write_shard(
