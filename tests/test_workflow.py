@@ -72,6 +72,12 @@ def test_smoke_outputs(smoke):
             assert fc.attrs["patient"] == patient and set(fc["exercise"].values) == {"TGE2"}
             dims[patient] = fc["finger_dimension_mm"].to_series()
     assert dims["p01"]["L3PP"] == pytest.approx(52.0) and dims["mean"]["L3PP"] != pytest.approx(52.0)
+    # the stiffness study on the chain: every solve converged, co-pressurising stiffens, the unit model beside it
+    with xr.open_dataset(res / "actuator" / "unit_stiffness.nc") as st:
+        assert (st["status"] == 0).all() and "git_commit" in st.attrs
+        k = st["k_nm_per_deg"].values
+        assert (k > 0).all() and k[1] > k[0]  # (60, 60) kPa stiffer than (0, 0)
+        assert "k_model_rel_error" in st
     assert (res / "musculoskeletal" / "rsm_r2.png").stat().st_size > 10_000
     assert any((res / "benchmarks" / "rules").glob("rsm.tsv"))
     # the run ledger: one MLflow run per patient, with headline metrics
