@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from workflow import fem
-from workflow.actuator.stiffness import SOLVES, chain_mesh, compare_model, rotation_stiffness, stiffness_dataset
+from workflow.actuator.moment_check import chain_mesh
+from workflow.actuator.stiffness import SOLVES, compare_model, rotation_stiffness, stiffness_dataset
 from workflow.actuator.unit_model import UnitModel
 
 J = {name: k for k, (name, _, _) in enumerate(SOLVES)}

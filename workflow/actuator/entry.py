@@ -15,7 +15,7 @@ import xarray as xr
 
 from workflow import fem
 from workflow.actuator.mapping import map_pairs, mapping_dataset, read_planned_pressures
-from workflow.actuator.moment_check import moment_check
+from workflow.actuator.moment_check import chain_mesh, moment_check
 from workflow.actuator.plots import (
     plot_mapping,
     plot_moment_check,
@@ -24,13 +24,7 @@ from workflow.actuator.plots import (
     plot_unit_stiffness,
 )
 from workflow.actuator.pressure_limit import PressureLimit, smallest
-from workflow.actuator.stiffness import (
-    DEFAULT_STIFFNESS,
-    chain_mesh,
-    compare_model,
-    rotation_stiffness,
-    stiffness_dataset,
-)
+from workflow.actuator.stiffness import DEFAULT_STIFFNESS, compare_model, rotation_stiffness, stiffness_dataset
 from workflow.actuator.surrogates import Surrogate, fit_surrogate, load_surrogate, save_surrogate, surrogate_cv
 from workflow.actuator.sweep import merge_shards
 from workflow.actuator.unit_model import load_unit_model

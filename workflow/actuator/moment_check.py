@@ -44,6 +44,7 @@ __all__ = [
     "lookup",
     "model_moment_nm",
     "unit_rotations_deg",
+    "chain_mesh",
     "run_fea",
     "compare",
     "moment_check",
@@ -103,6 +104,13 @@ def model_moment_nm(model: UnitModel, pt_kpa, pb_kpa, angle_deg) -> np.ndarray:
     return k * u
 
 
+def chain_mesh(unit, chain_units: int = 5, **layers):
+    """The reference chain of ``chain_units`` chambers, cut at gap centres (its ends are the backbone alone), on the
+    unit's geometry and element size; ``layers``: `workflow.fem.layer_options`."""
+    geom = dict(unit.geometry, n_chambers=int(chain_units))
+    return fem.build_unit_mesh(geom, h=unit.h, dim=unit.dim, end_gaps=True, **layers)
+
+
 def unit_rotations_deg(um, u: np.ndarray) -> np.ndarray:
     """Backbone rotation of each unit (deg, positive = P_T sense) between the centres of its gaps.
 
@@ -145,9 +153,7 @@ def run_fea(
     fr = np.asarray(fractions, float)
     holds = list(end_holds)
     unit = fem.unit_mesh_from_config(actuator, dim)
-    geom = dict(unit.geometry, n_chambers=int(chain_units))
-    h = unit.h
-    chain = fem.build_unit_mesh(geom, h=h, dim=dim, end_gaps=True, **fem.layer_options(actuator))
+    chain = chain_mesh(unit, chain_units, **fem.layer_options(actuator))
     n = int(unit.geometry["n_chambers"])
     mid = int(chain_units) // 2
     npt, nh, ns = len(pairs), len(holds), 1 + len(fr)

@@ -190,8 +190,5 @@ def plot_unit_stiffness(ds: xr.Dataset, out: str | Path) -> Path:
         fontsize=8,
     )
     fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    _save(fig, out)
+    return Path(out)

@@ -30,7 +30,7 @@ from workflow.actuator.moment_check import unit_rotations_deg
 from workflow.actuator.unit_model import UnitModel
 from workflow.common.constants import SOLVER_STATUS
 
-__all__ = ["DEFAULT_STIFFNESS", "SOLVES", "chain_mesh", "compare_model", "rotation_stiffness", "stiffness_dataset"]
+__all__ = ["DEFAULT_STIFFNESS", "SOLVES", "compare_model", "rotation_stiffness", "stiffness_dataset"]
 
 log = logging.getLogger(__name__)
 
@@ -45,12 +45,6 @@ DEFAULT_STIFFNESS = {
 SOLVES = (("free", "free", 0.0), ("blocked", "blocked", 0.0), ("plus", "rotation", 1.0), ("minus", "rotation", -1.0))
 
 
-def chain_mesh(unit: fem.UnitMesh, chain_units: int = 5, **layers) -> fem.UnitMesh:
-    """The chain of ``chain_units`` chambers, cut at gap centres, on the unit's geometry and element size."""
-    geom = dict(unit.geometry, n_chambers=int(chain_units))
-    return fem.build_unit_mesh(geom, h=unit.h, dim=unit.dim, end_gaps=True, **layers)
-
-
 def rotation_stiffness(
     chain: fem.UnitMesh,
     pairs_kpa: Sequence[Sequence[float]],
@@ -61,7 +55,7 @@ def rotation_stiffness(
 ) -> dict[str, np.ndarray]:
     """FEA of the chain at each pressure pair: free, blocked and end rotations of +-``delta_deg`` per unit.
 
-    ``chain``: a `chain_mesh` (cut at gap centres, so its ends are the backbone alone). With ``actuator`` (the
+    ``chain``: a `workflow.actuator.moment_check.chain_mesh` (cut at gap centres, so its ends are the backbone alone). With ``actuator`` (the
     config section) every solve takes its material, contact, solver and restarts
     (`workflow.fem.solve_unit_from_config`); without it `workflow.fem.solve_unit` with ``solve_kwargs``. Returns
     arrays over (pair, solve) of ``status``, ``load_factor``, ``moment_nm``, ``mid_angle_deg`` (the middle unit's
