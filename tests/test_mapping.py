@@ -164,3 +164,10 @@ def test_loaded_map_matches_the_angles_under_the_units_moment():
     np.testing.assert_allclose(r["angle_3d_deg"], th3(pt, pb) - m / k3)
     free = mapping.map_pairs(pt, pb, th3, th2, p_max_2d_kpa=1e4)
     assert free["scale"][2] == pytest.approx(r["scale"][2], rel=1e-9)
+
+
+def test_table7_moments_per_exercise_and_group():
+    m = mapping.read_unit_moments(REPO_ROOT / "resources" / "table07_unit_targets.csv", ["TGE3", "TGE9"])
+    assert m.shape == (2, 4)
+    np.testing.assert_allclose(m[0], [1.28e-3, 1.28e-3, 7.71e-3, -1.37e-4])  # CMC, MCP, PIP, DIP
+    assert np.isnan(m[1]).all()  # an exercise the table lacks

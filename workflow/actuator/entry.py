@@ -10,11 +10,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-import pandas as pd
 import xarray as xr
 
 from workflow import fem
-from workflow.actuator.mapping import map_pairs, mapping_dataset, read_planned_pressures
+from workflow.actuator.mapping import map_pairs, mapping_dataset, read_planned_pressures, read_unit_moments
 from workflow.actuator.moment_check import chain_mesh, moment_check
 from workflow.actuator.plots import (
     plot_mapping,
@@ -195,9 +194,8 @@ def write_mapping(
 
 def _loaded_map(ds, unit_moments_csv, surrogate_3d, surrogate_2d, unit_model, p_max_2d_kpa, p_max_3d_kpa):
     """The Table 8 pairs of ``ds`` mapped under Table 7's unit moments (variables ``*_loaded``)."""
-    t7 = pd.read_csv(unit_moments_csv).set_index("exercise")
     ex = [str(e) for e in ds["exercise"].values]
-    m = np.array([[float(t7.loc[e, f"M_{g}_Nm"]) for g in GROUPS] for e in ex])  # (exercise, group)
+    m = read_unit_moments(unit_moments_csv, ex)  # (exercise, group)
     u3 = load_unit_model(surrogate_3d, **dict(unit_model or {}))
     u2 = load_unit_model(surrogate_2d, **dict(unit_model or {}))
     p3 = ds["pressure_3d_kpa"].values

@@ -37,7 +37,7 @@ from scipy.optimize import brentq
 
 from workflow.common.constants import CHAMBERS, GROUPS, MAPPING_STATUS
 
-__all__ = ["map_pairs", "read_planned_pressures", "mapping_dataset"]
+__all__ = ["map_pairs", "read_planned_pressures", "read_unit_moments", "mapping_dataset"]
 
 _REASONS = {
     0: "",
@@ -134,6 +134,13 @@ def read_planned_pressures(path: str | Path) -> pd.DataFrame:
     if missing:
         raise ValueError(f"{path}: missing columns {missing}")
     return df
+
+
+def read_unit_moments(path: str | Path, exercises: list[str]) -> np.ndarray:
+    """Table 7 layout (exercise, M_<GROUP>_Nm) -> moments per unit (exercise, group) in N m, NaN for an exercise the
+    table lacks."""
+    tab = pd.read_csv(path).set_index("exercise")
+    return np.array([[float(tab.loc[e, f"M_{g}_Nm"]) if e in tab.index else np.nan for g in GROUPS] for e in exercises])
 
 
 def mapping_dataset(

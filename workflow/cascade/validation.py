@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from workflow.actuator.mapping import read_unit_moments
 from workflow.cascade.model import SPANS
 from workflow.common.constants import GROUPS, PRESSURE_NAMES
 
@@ -135,13 +136,12 @@ def compare_unit_moments(plan: xr.Dataset, table07: str | Path) -> xr.Dataset:
     eight chambers, so only signs and ordering compare.
     """
 
-    tab = pd.read_csv(table07).set_index("exercise")
     ex = [str(e) for e in plan["exercise"].values]
     joint_of = {g: j for j, gs in SPANS.items() for g in gs}
     ours = np.array(
         [[float(plan["required_moment_nm"].sel(exercise=e, joint=joint_of[g])) for g in GROUPS] for e in ex]
     )
-    ref = np.array([[float(tab.loc[e, f"M_{g}_Nm"]) if e in tab.index else np.nan for g in GROUPS] for e in ex])
+    ref = read_unit_moments(table07, ex)
     return xr.Dataset(
         {
             "unit_moment_ours_nm": (

@@ -134,10 +134,10 @@ def write_fea_check(
     # the 2D pressures: the paper's free-angle map, or the angles matched under the moment each unit carries
     m_units = None
     if a3 is not None and fea_cfg.get("pressure_map", "free_angle") == "loaded":
-        if unit_model_cfg is None:
+        if ro_plan is None:
             raise ValueError("fea_check.pressure_map = loaded needs the unit model (surrogates.unit_model)")
-        a3 = load_unit_model(surrogate_3d, **unit_model_cfg).angle_deg
-        a2 = load_unit_model(surrogate_2d, **unit_model_cfg).angle_deg
+        # the chains above already hold both unit models (the plan's is the 3D one whenever the map is used)
+        a3, a2 = ro_plan.unit.angle_deg, ro_2d.unit.angle_deg
         ex = list(fea_cfg.get("exercises") or plan["exercise"].values)
         m_units = plan["unit_moment_nm"].sel(exercise=ex, group=list(GROUPS)).values
         log.info("2D pressures matched under the plan's unit moments (fea_check.pressure_map = loaded)")
