@@ -56,7 +56,7 @@ def test_co_pressurising_stiffens_the_unit(study):
 
 
 def test_model_comparison_and_dataset(study):
-    # a unit model whose secant is the FEA's everywhere has no error; the dataset carries both
+    # a unit model whose secant is twice the FEA's at the one-sided pair: error +1 there; the dataset carries both
     k_fea = dict(zip(map(tuple, study["pairs_kpa"]), study["k_nm_per_deg"]))
 
     def angle(pt, pb):
@@ -64,12 +64,11 @@ def test_model_comparison_and_dataset(study):
 
     def moment(pt, pb):
         pt, pb = np.broadcast_arrays(np.asarray(pt, float), np.asarray(pb, float))
-        return np.array([k_fea.get((a, b), 0.0) for a, b in zip(pt.ravel(), pb.ravel())]).reshape(pt.shape) * angle(
-            pt, pb
-        )
+        k = np.array([k_fea.get((a, b), 0.0) for a, b in zip(pt.ravel(), pb.ravel())]).reshape(pt.shape)
+        return 2.0 * k * angle(pt, pb)
 
     cmp = compare_model(study, UnitModel(angle, moment))
-    assert cmp["k_model_rel_error"][2] == pytest.approx(0.0, abs=1e-12)
+    assert cmp["k_model_rel_error"][2] == pytest.approx(1.0, rel=1e-12)
     ds = stiffness_dataset(study, delta_deg=1.0, h_mm=2.0, chain_units=3, model=cmp)
     assert ds.sizes == {"pair": 3, "solve": len(SOLVES)}
     assert ds["k_nm_per_deg"].attrs["units"] == "N m / degree" and "k_model_rel_error" in ds
