@@ -133,13 +133,19 @@ for name in slurmd slurmctld; do
     fi
 done
 
+# A fresh test cluster: the state an earlier, interrupted run left in the spool
+# (saved jobs, vestigial job scripts) would bring its jobs back and keep the node
+# 'mixed' instead of idle, so the spool is emptied and both daemons start clean (-c).
+rm -rf "${SPOOL:?}/ctld" "${SPOOL:?}/d"
+mkdir -p "$SPOOL/ctld" "$SPOOL/d"
+
 deadline=$(( $(date +%s) + START_TIMEOUT ))
-slurmctld -i
+slurmctld -c -i
 until scontrol ping 2>/dev/null | grep -q UP; do
     [ "$(date +%s)" -lt "$deadline" ] || die 1 "slurmctld not up after ${START_TIMEOUT}s: $(tail -5 $LOGDIR/slurmctld.log | tr '\n' ' ')"
     sleep 0.2
 done
-slurmd -N localhost
+slurmd -c -N localhost
 until node_state | grep -q '^idle'; do
     [ "$(date +%s)" -lt "$deadline" ] || die 1 "node not idle after ${START_TIMEOUT}s (state '$(node_state)'): $(tail -5 $LOGDIR/slurmd.log | tr '\n' ' ')"
     case "$(node_state)" in
