@@ -252,7 +252,12 @@ def get_check_study_slice(wildcards):
 
 def get_fem_case_slice(wildcards):
     """Param function: one FE case of the fidelity study depends on the unit config and the study points."""
-    return {"case": wildcards.case, "actuator": config["actuator"], "p_top_kpa": config["fidelity"]["p_top_kpa"]}
+    return {
+        "case": wildcards.case,
+        "actuator": config["actuator"],
+        "p_top_kpa": config["fidelity"]["p_top_kpa"],
+        "iteration_budget": config["fidelity"]["fem_iteration_budget"],
+    }
 
 
 def get_fem_tolerances():

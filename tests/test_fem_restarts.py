@@ -47,10 +47,61 @@ def test_the_units_restarts_keep_their_numbers_when_contact_only_ones_are_skippe
     def fake_solve_unit(um, p_top, p_bottom, case, contact, **kw):
         calls.append((contact, dict(kw["solver"] or {})))
         ok = len(calls) == 2
-        return SimpleNamespace(status=0 if ok else 1, load_factor=1.0 if ok else 0.4, reason="", wall_time_s=2.0)
+        return SimpleNamespace(
+            status=0 if ok else 1, load_factor=1.0 if ok else 0.4, reason="", wall_time_s=2.0, newton_iterations=10
+        )
 
     monkeypatch.setattr(_config, "solve_unit", fake_solve_unit)
     act = {"contact": {"enabled": False}, "solver": {"max_step": 0.25}}
     res = _config.solve_unit_from_config(act, 2, 60.0, 0.0, mesh=object())
     assert res.attempt == 3 and res.wall_time_s == 4.0
     assert calls == [(False, {"max_step": 0.25}), (False, {"max_step": 0.02, "predictor": False})]
+
+
+def test_an_iteration_budget_is_shared_by_a_rays_restarts(monkeypatch):
+    """actuator.iteration_budget caps the Newton iterations of all attempts together: each attempt gets what is
+    left, and once it is spent no further restart runs (the ray is a failed solve, the furthest attempt kept)."""
+    from workflow.fem import _config
+
+    calls = []
+
+    def fake_solve_unit(um, p_top, p_bottom, case, contact, **kw):
+        cap = kw["solver"]["max_iterations"]
+        calls.append(cap)
+        return SimpleNamespace(
+            status=2, load_factor=0.1 * len(calls), reason="", wall_time_s=1.0, newton_iterations=min(15, cap)
+        )
+
+    monkeypatch.setattr(_config, "solve_unit", fake_solve_unit)
+    res = _config.solve_unit_from_config({"iteration_budget": 25}, 2, 60.0, 0.0, mesh=object())
+    assert calls == [25, 10]  # the second attempt gets the 10 left; the third and fourth never run
+    assert res.status == 2 and res.attempt == 1 and res.wall_time_s == 2.0
+    # an attempt's own tighter cap is kept
+    calls.clear()
+    _config.solve_unit_from_config(
+        {"iteration_budget": 100, "solver": {"max_iterations": 12}, "restarts": []}, 2, 60.0, 0.0, mesh=object()
+    )
+    assert calls == [12]
+
+
+def test_a_path_stops_when_its_newton_iterations_are_spent():
+    """The engine's budget: a 2D unit ray that converges with enough iterations stops with status 2 and says why
+    when it may use fewer than it needs; the steps it did take are the same."""
+    um = fem.build_unit_mesh(None, h=1.0, dim=2)
+    full = fem.solve_unit(um, 60.0, 0.0, "free", True)
+    assert full.status == 0
+    cut = fem.solve_unit(um, 60.0, 0.0, "free", True, solver={"max_iterations": full.newton_iterations // 2})
+    assert cut.status == 2 and "budget" in cut.reason
+    assert full.newton_iterations // 2 <= cut.newton_iterations < full.newton_iterations
+    assert 0 < cut.load_factor < 1
+
+
+def test_the_predictor_is_off_by_default_in_3d_where_it_makes_the_first_steps_cut_back():
+    """In 3D the extrapolated first guess of a step puts the ballooning walls far off incompressibility: with it the
+    3D unit cuts back within its first four steps; by default (no predictor in 3D) it does not, and both land on the
+    same state where they meet."""
+    um = fem.build_unit_mesh(None, h=2.0, dim=3)
+    default = fem.solve_unit(um, 300.0, 0.0, "free", False, solver={"max_steps": 4})
+    forced = fem.solve_unit(um, 300.0, 0.0, "free", False, solver={"max_steps": 4, "predictor": True})
+    assert default.cutbacks == 0 and default.load_factor > forced.load_factor
+    assert forced.cutbacks >= 1

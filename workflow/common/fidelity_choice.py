@@ -58,11 +58,14 @@ def fem_cases(spec: Sequence[Mapping]) -> list[FemCase]:
     return out
 
 
-def case_actuator(actuator: Mapping, case: FemCase) -> dict:
-    """The ``actuator`` config with the case's element size and contact switch."""
+def case_actuator(actuator: Mapping, case: FemCase, iteration_budget: int | None = None) -> dict:
+    """The ``actuator`` config with the case's element size and contact switch (and the study's Newton budget)."""
     mesh = dict(actuator.get("mesh", {}), **{f"h_{case.model}_mm": float(case.h_mm)})
     contact = dict(actuator.get("contact", {}), enabled=bool(case.contact))
-    return dict(actuator, mesh=mesh, contact=contact)
+    out = dict(actuator, mesh=mesh, contact=contact)
+    if iteration_budget is not None:
+        out["iteration_budget"] = int(iteration_budget)
+    return out
 
 
 @dataclass

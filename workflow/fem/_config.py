@@ -54,7 +54,10 @@ def solve_unit_from_config(
     (default ``DEFAULT_RESTARTS``) until one reaches the end; the result says
     which (``attempt``, 0 = as configured, and ``contact_smoothing_mm``) and
     its ``wall_time_s`` counts every attempt up to it. If none does, the
-    attempt that got furthest is returned.
+    attempt that got furthest is returned.  ``actuator.iteration_budget``
+    (Newton iterations of the ray, all attempts together; None = no limit)
+    ends a ray that cannot pass a contact event instead of letting its
+    restarts run for an hour: it is then a failed solve (status 2) like any other.
     """
     um = mesh if mesh is not None else unit_mesh_from_config(actuator, dim)
     kwargs.setdefault("end_hold", actuator.get("end_hold", DEFAULT_END_HOLD))
@@ -66,11 +69,16 @@ def solve_unit_from_config(
         k for k, (c, _) in enumerate(attempts) if k == 0 or c.get("enabled", True) or set(restarts[k - 1]) - {"contact"}
     ]
     spent = 0.0
+    budget = actuator.get("iteration_budget")
+    used = 0
 
     def solve(contact_opts: dict, solver: dict) -> UnitResult:
-        nonlocal spent
+        nonlocal spent, used
         opts = dict(contact_opts)
         enabled = opts.pop("enabled", True)
+        if budget is not None:
+            own = solver.get("max_iterations")
+            solver = dict(solver, max_iterations=int(budget) - used if own is None else min(own, int(budget) - used))
         res = solve_unit(
             um,
             p_top_kpa,
@@ -84,10 +92,12 @@ def solve_unit_from_config(
         )
         res.contact_smoothing_mm = float(opts.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
         spent += res.wall_time_s
+        used += res.newton_iterations
         return res
 
     label = f"{dim}d {case} to ({p_top_kpa:g}, {p_bottom_kpa:g}) kPa"
-    res, k = first_converged([attempts[k] for k in index], solve, label=label)
+    left = None if budget is None else (lambda: used < int(budget))
+    res, k = first_converged([attempts[k] for k in index], solve, label=label, budget_left=left)
     attempt = index[k]
     res.attempt = attempt
     res.wall_time_s = spent  # the cost of the result includes every attempt

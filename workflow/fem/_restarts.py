@@ -43,15 +43,22 @@ def cumulative_attempts(contact: Mapping, solver: Mapping, restarts: Sequence[Ma
 
 
 def first_converged(
-    attempts: Iterable[tuple[dict, dict]], solve: Callable[[dict, dict], R], label: str = "solve"
+    attempts: Iterable[tuple[dict, dict]],
+    solve: Callable[[dict, dict], R],
+    label: str = "solve",
+    budget_left: Callable[[], bool] | None = None,
 ) -> tuple[R, int]:
     """Run ``solve(contact, solver)`` per attempt until one converges (``status`` 0).
 
     Returns that result and its attempt index (0 = as configured), else the one that got furthest
-    (``load_factor``) and its index.  Each stall is logged.
+    (``load_factor``) and its index.  Each stall is logged.  ``budget_left()`` (optional) is asked
+    before every attempt after the first: False ends the attempts (a shared budget is spent).
     """
     best, best_k = None, -1
     for k, (contact, solver) in enumerate(attempts):
+        if k > 0 and budget_left is not None and not budget_left():
+            log.info("%s: budget spent after %d attempt(s), no further restart", label, k)
+            break
         res = solve(contact, solver)
         if res.status == 0:
             return res, k

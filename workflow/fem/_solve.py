@@ -36,13 +36,18 @@ DEFAULT_SOLVER = {
     "min_step": 1.0e-4,  # give up below this increment
     "max_step": 0.25,  # largest increment
     "max_steps": 400,  # accepted + rejected steps
+    "max_iterations": None,  # Newton iterations of the whole path (None: no limit); a budget, not a wall time,
+    # so that where a solve stops does not depend on the machine
     "max_iter": 15,  # Newton iterations per step
     "grow_below_iter": 6,  # grow the step when a step took fewer iterations
     "grow": 1.5,
     "cut": 0.5,
     "rtol": 1.0e-6,  # |r| <= rtol * (|f_ext| + |reactions|)
     "atol": 1.0e-10,  # N
-    "predictor": True,  # extrapolate the last increment as the first guess
+    # first guess of a step: True extrapolates the last increment, None by dimension (measured on the unit's rays,
+    # docs/fea.md): in 2D it saves 30 % of the free ray's iterations; in 3D the extrapolated ballooning walls
+    # violate the near-incompressibility, start Newton 1000x above the load increment and stall the ray
+    "predictor": None,
     "line_search": True,  # Matthies-Strang line search on the Newton correction
 }
 
@@ -356,6 +361,7 @@ def solve_path(
     """
     opts = dict(DEFAULT_SOLVER)
     opts.update(options or {})
+    predict = getattr(model.solid, "dim", 2) == 2 if opts["predictor"] is None else bool(opts["predictor"])
     t_start = time.perf_counter()
     if u0 is None:
         u = np.zeros(model.nstate)
@@ -371,12 +377,15 @@ def solve_path(
         if steps >= opts["max_steps"]:
             status, reason = 2, "too many steps"
             break
+        if opts["max_iterations"] is not None and iters >= opts["max_iterations"]:
+            status, reason = 2, f"Newton iteration budget ({int(opts['max_iterations'])}) spent"
+            break
         dlam = min(dlam, 1.0 - lam)
         nxt = min([st for st in stops if st > lam + 1e-12], default=1.0)
         step = min(dlam, nxt - lam)
         target = lam + step if nxt - (lam + step) > 1e-9 else nxt
         guess = u
-        if opts["predictor"] and dlam_prev > 0:
+        if predict and dlam_prev > 0:
             guess = u + ((target - lam) / dlam_prev) * (u - u_prev)
         steps += 1
         # a step that fails is retried once with the line search switched (it

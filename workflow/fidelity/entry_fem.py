@@ -32,17 +32,20 @@ def write_fem_case(
     actuator: Mapping[str, Any],
     config_slice: Any,
     p_top_kpa: Sequence[float] = P_STUDY,
+    iteration_budget: int | None = None,
     rule: str = "fidelity_fem",
 ) -> xr.Dataset:
     """Rule ``fidelity_fem``: the unit check of one case -> ``results/fidelity/fem/{case}.nc``.
 
     Free angle and blocked moment per unit at ``p_top_kpa`` (P_B = 0) with
     their wall times (:func:`workflow.fem.unit_check`, retries included).
+    ``iteration_budget``: Newton iterations per ray, restarts included (None:
+    the actuator's own); a ray that spends it is recorded as failed (status 2).
     """
 
     case = FemCase.parse(case_name)
     t0 = time.perf_counter()
-    ds, _ = fem.unit_check(case_actuator(actuator, case), (case.model,), p_top_kpa)
+    ds, _ = fem.unit_check(case_actuator(actuator, case, iteration_budget), (case.model,), p_top_kpa)
     wall = time.perf_counter() - t0
     ds = ds.squeeze("model", drop=True)
     ds["case_wall_time_s"] = (
@@ -51,6 +54,7 @@ def write_fem_case(
         {"units": "s", "long_name": "wall time of both rays (free, blocked), retries included"},
     )
     ds.attrs.update({"case": case.name, "model": case.model, "h_mm": case.h_mm, "contact": int(case.contact)})
+    ds.attrs["iteration_budget"] = "none" if iteration_budget is None else int(iteration_budget)
     log.info(
         "%s: free %s deg, blocked %s N m, status %s, %.1f s",
         case.name,

@@ -9,5 +9,6 @@ write_fem_case(
     actuator=p.actuator,  # noqa: F821
     config_slice=p.config_slice,
     p_top_kpa=p.p_top_kpa,
+    iteration_budget=p.iteration_budget,
     rule=snakemake.rule,
 )  # noqa: F821
