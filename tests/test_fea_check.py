@@ -15,7 +15,7 @@ from workflow.cascade import finger as F
 from workflow.cascade import planning
 from workflow.fea_check import correction
 from workflow.fea_check.applied import pressures_2d
-from workflow.fea_check.model import finger_profiles, lame, spring_callables
+from workflow.fea_check.model import DEFAULT_FEA_CHECK, finger_profiles, lame, spring_callables
 from workflow.fem._mesh import build_actuator_mesh
 from workflow.fem.actuator import solve_standalone
 from workflow.fem.coupled import cell_areas, nodal_body_force
@@ -137,8 +137,13 @@ def test_zero_pressure_leaves_the_actuator_straight_and_equal_pressures_do_not_b
     assert r.status == 0
     assert abs(r.tip_angle_deg) < 0.05
     np.testing.assert_allclose(r.backbone_mm[:, 1], 0.0, atol=0.02)
-    # top only bends it towards the bottom side (positive), as the unit
-    rt = solve_standalone(um, {"A": (60.0, 0.0), "B": (60.0, 0.0)}, solver=SOLVER)
+    # top only bends it towards the bottom side (positive), as the unit; at 60 kPa the blocks' first corner contact
+    # (tip near 16 deg) stalls the first attempt or not by round-off (it passed in CI, stopped at 0.24 of the load on
+    # another machine), so the solve retries as the workflow's stand-alone solves do
+    rt, _ = fem.first_converged(
+        fem.cumulative_attempts({}, SOLVER, DEFAULT_FEA_CHECK["restarts"]),
+        lambda c, s: solve_standalone(um, {"A": (60.0, 0.0), "B": (60.0, 0.0)}, contact_options=c, solver=s),
+    )
     assert rt.status == 0 and rt.tip_angle_deg > 5.0 and rt.backbone_mm[-1, 1] < 0
 
 
