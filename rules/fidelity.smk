@@ -22,6 +22,8 @@ rule fidelity_fem:
         "results/benchmarks/rules/fidelity_fem_{case}.tsv"
     wildcard_constraints:
         case=r"fem_(2d|3d)_h[0-9.]+_(contact|nocontact)",
+    # first in the queue: every sweep waits for the study's mesh choice, so its cases are the cold run's critical path
+    priority: 10
     conda:
         "../envs/project.yaml"
     params:
