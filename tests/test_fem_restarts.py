@@ -105,3 +105,18 @@ def test_the_predictor_is_off_by_default_in_3d_where_it_makes_the_first_steps_cu
     forced = fem.solve_unit(um, 300.0, 0.0, "free", False, solver={"max_steps": 4, "predictor": True})
     assert default.cutbacks == 0 and default.load_factor > forced.load_factor
     assert forced.cutbacks >= 1
+
+
+def test_a_long_path_logs_its_progress(monkeypatch, caplog):
+    """A ray that runs longer than PROGRESS_EVERY_S says how far it is (load, steps, iterations, time) as it goes."""
+    import logging
+
+    from workflow.fem import _solve
+
+    monkeypatch.setattr(_solve, "PROGRESS_EVERY_S", 0.0)
+    um = fem.build_unit_mesh(None, h=2.0, dim=2)
+    with caplog.at_level(logging.INFO, logger="workflow.fem._solve"):
+        res = fem.solve_unit(um, 20.0, 0.0, "blocked", False, solver={"max_steps": 3})
+    said = [r.getMessage() for r in caplog.records if r.name == "workflow.fem._solve"]
+    assert len(said) == len(res.history) >= 1
+    assert said[0].startswith("load ") and "Newton iterations" in said[0]

@@ -16,6 +16,7 @@ Over 400 lines: the Newton path solve, its step control, line search and history
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -28,6 +29,11 @@ from ._assembly import Pattern, SolidAssembler, vector_dofs
 from ._pressure import pressure_load
 
 __all__ = ["Model", "PathResult", "solve_path", "DEFAULT_SOLVER", "linear_solve"]
+
+log = logging.getLogger(__name__)
+
+#: A path that runs longer than this logs its progress this often (s): the 3D rays of the FE study run for minutes.
+PROGRESS_EVERY_S = 60.0
 
 
 #: Step control and tolerances (config ``actuator.solver``).
@@ -373,6 +379,7 @@ def solve_path(
     lam, dlam, dlam_prev = 0.0, float(opts["initial_step"]), 0.0
     history, iters, steps, cuts = [], 0, 0, 0
     status, reason = 0, ""
+    t_said = t_start
     while lam < 1.0 - 1e-12:
         if steps >= opts["max_steps"]:
             status, reason = 2, "too many steps"
@@ -412,6 +419,16 @@ def solve_path(
             history.append(rec)
             if its < opts["grow_below_iter"]:
                 dlam = min(dlam * opts["grow"], opts["max_step"])
+            if rec["wall_time_s"] - (t_said - t_start) >= PROGRESS_EVERY_S:
+                t_said = time.perf_counter()
+                log.info(
+                    "load %.1f %% after %d steps (%d cut back), %d Newton iterations, %.0f s",
+                    100 * lam,
+                    steps,
+                    cuts,
+                    iters,
+                    rec["wall_time_s"],
+                )
         else:
             cuts += 1
             reason = why
