@@ -70,6 +70,7 @@ def solve_unit_from_config(
     ]
     spent = 0.0
     budget = actuator.get("iteration_budget")
+    budget = None if budget is None else int(budget)
     used = 0
 
     def solve(contact_opts: dict, solver: dict) -> UnitResult:
@@ -78,7 +79,7 @@ def solve_unit_from_config(
         enabled = opts.pop("enabled", True)
         if budget is not None:
             own = solver.get("max_iterations")
-            solver = dict(solver, max_iterations=int(budget) - used if own is None else min(own, int(budget) - used))
+            solver = dict(solver, max_iterations=budget - used if own is None else min(own, budget - used))
         res = solve_unit(
             um,
             p_top_kpa,
@@ -96,7 +97,7 @@ def solve_unit_from_config(
         return res
 
     label = f"{dim}d {case} to ({p_top_kpa:g}, {p_bottom_kpa:g}) kPa"
-    left = None if budget is None else (lambda: used < int(budget))
+    left = None if budget is None else (lambda: used < budget)
     res, k = first_converged([attempts[k] for k in index], solve, label=label, budget_left=left)
     attempt = index[k]
     res.attempt = attempt

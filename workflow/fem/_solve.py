@@ -367,7 +367,7 @@ def solve_path(
     """
     opts = dict(DEFAULT_SOLVER)
     opts.update(options or {})
-    predict = getattr(model.solid, "dim", 2) == 2 if opts["predictor"] is None else bool(opts["predictor"])
+    predict = model.solid.dim == 2 if opts["predictor"] is None else bool(opts["predictor"])
     t_start = time.perf_counter()
     if u0 is None:
         u = np.zeros(model.nstate)
@@ -419,7 +419,7 @@ def solve_path(
             history.append(rec)
             if its < opts["grow_below_iter"]:
                 dlam = min(dlam * opts["grow"], opts["max_step"])
-            if rec["wall_time_s"] - (t_said - t_start) >= PROGRESS_EVERY_S:
+            if time.perf_counter() - t_said >= PROGRESS_EVERY_S:
                 t_said = time.perf_counter()
                 log.info(
                     "load %.1f %% after %d steps (%d cut back), %d Newton iterations, %.0f s",
