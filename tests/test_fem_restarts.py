@@ -85,8 +85,8 @@ def test_an_iteration_budget_is_shared_by_a_rays_restarts(monkeypatch):
 
 
 def test_a_path_stops_when_its_newton_iterations_are_spent():
-    """The engine's budget: a 2D unit ray that converges with enough iterations stops with status 2 and says why
-    when it may use fewer than it needs; the steps it did take are the same."""
+    """The engine's budget: a 2D unit ray that converges with enough iterations stops with status 2, short of the
+    load, and says why when it may use half of them."""
     um = fem.build_unit_mesh(None, h=1.0, dim=2)
     full = fem.solve_unit(um, 60.0, 0.0, "free", True)
     assert full.status == 0
@@ -98,8 +98,7 @@ def test_a_path_stops_when_its_newton_iterations_are_spent():
 
 def test_the_predictor_is_off_by_default_in_3d_where_it_makes_the_first_steps_cut_back():
     """In 3D the extrapolated first guess of a step puts the ballooning walls far off incompressibility: with it the
-    3D unit cuts back within its first four steps; by default (no predictor in 3D) it does not, and both land on the
-    same state where they meet."""
+    3D unit cuts back within its first four steps; by default (no predictor in 3D) it does not, and gets further."""
     um = fem.build_unit_mesh(None, h=2.0, dim=3)
     default = fem.solve_unit(um, 300.0, 0.0, "free", False, solver={"max_steps": 4})
     forced = fem.solve_unit(um, 300.0, 0.0, "free", False, solver={"max_steps": 4, "predictor": True})
