@@ -175,6 +175,87 @@ def test_stiffness_planner_co_pressurises_to_hold_the_pose_stiffer():
         planning.plan_exercise(m, target, planner="stiffest")
 
 
+def test_paper_rule_gives_each_unit_its_angle_under_its_moment_and_co_pressurises_straight_groups():
+    # the paper's rule on the straight pose (TGE1): each span's units start on the 300 kPa top-pressure curve where
+    # their free angle is the unit's target (0 where no strap takes up rotation: P = (300, 300)), and the top
+    # pressure alone then moves until each unit gives that angle under the span's moment, the bottom held
+    m = model()
+    unit = LinearUnit()
+    plan = planning.plan_exercise(m, [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS, planner="paper")
+    p = plan.pressures_kpa.reshape(4, 2)
+    assert np.all(p[:, 0] > 0) and np.all(p[:, 0] < 300) and np.all(p[:, 1] > 250)  # co-pressurised
+    m_req = plan.required_moments_nm
+    comp = np.rad2deg(C._strap_compliance(m) * m_req)
+    a, k0, k1 = unit.c, unit.k0, unit.k1
+    for j, g in ((0, 1), (1, 2), (2, 3)):  # MCP span (CMC tied to MCP), PIP, DIP
+        theta_u = -comp[j] / m.span_counts()[j].sum()
+        assert theta_u >= 0  # the straps give a little extension under an extension moment
+        b = 300.0 - theta_u / a  # (a): the double's free angle a (300 - b) = theta_u
+        assert p[g, 1] == pytest.approx(b, abs=0.02)
+        # (b), the double in closed form: a (t - b) - m / (k0 + k1 (t + b)) = theta_u, a quadratic in t
+        roots = np.roots(
+            [a * k1, a * k0 - theta_u * k1, -a * b * k0 - a * k1 * b**2 - m_req[j] - theta_u * (k0 + k1 * b)]
+        )
+        t_exact = roots[(roots.real > 0) & (roots.real < 300)].real
+        assert p[g, 0] == pytest.approx(float(t_exact[0]), abs=0.02)
+    assert p[0, 1] == pytest.approx(300.0)  # the MCP span has no strap: free angle 0 on the diagonal
+    assert plan.achieved, plan.reason
+    np.testing.assert_allclose(plan.equilibrium.joint_angles_deg, 0.0, atol=0.5)
+    # the least-pressure plan of the same pose pressurises one chamber of a group at most
+    least = planning.plan_exercise(m, [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS)
+    assert np.all(np.minimum(least.pressures_kpa[0::2], least.pressures_kpa[1::2]) == 0)
+
+
+def test_paper_rule_bends_every_span_exactly_under_its_moment_within_the_limit():
+    # a flexion target: each span's units bend by exactly their share under the span moment at the planned pose
+    # (the rule solves for it, not within a goal), co-pressurised from the limit's top-pressure curve
+    m = model()
+    unit = LinearUnit()
+    target = C.solve_equilibrium(m, np.array([200, 0, 200, 0, 150, 0, 0, 0], float)).joint_angles_deg
+    target[2] = 0.0
+    plan = planning.plan_exercise(m, target, tol_deg=5.0, active_limits_nm=LIMITS, planner="paper", p_max_kpa=280.0)
+    p = plan.pressures_kpa.reshape(4, 2)
+    assert np.all(p <= 280.0) and np.all(p > 0)  # every group co-pressurised, none above the limit
+    assert np.any(p == 280.0)
+    m_req = plan.required_moments_nm
+    comp = np.rad2deg(C._strap_compliance(m) * m_req)
+    counts = m.span_counts()
+    for j in range(3):
+        bend = comp[j] + sum(counts[j][g] * unit.angle_deg(p[g, 0], p[g, 1], m_req[j]) for g in range(4))
+        assert bend == pytest.approx(target[j], abs=0.01)
+    assert plan.achieved, plan.reason
+    assert np.max(np.abs(plan.equilibrium.joint_angles_deg - target)) <= 5.0
+
+
+def test_planner_comparison_scores_each_planner_against_a_table():
+    # a table equal to the paper planner's own pressures is 0 % off for it and not for the least-pressure planner
+    import pandas as pd
+
+    from workflow.cascade import validation
+    from workflow.common.constants import PRESSURE_NAMES
+
+    m = model()
+    targets = {"TGE1": [0, 0, 0], "TGE2": [60, 0, 0], "TGE3": [60, 40, 0]}
+    by = {pl: planning.plan_patient(m, targets, active_limits_nm=LIMITS, planner=pl) for pl in planning.PLANNERS}
+    ds = planning.plans_dataset(m, by["least_pressure"], tol_deg=5.0, active_limits_nm=LIMITS).merge(
+        planning.planners_dataset(by)
+    )
+    assert list(ds["planner"].values) == list(planning.PLANNERS)
+    np.testing.assert_allclose(
+        ds["planner_pressure_kpa"].sel(planner="least_pressure").values, ds["pressure_kpa"].values
+    )
+    table = pd.DataFrame(
+        [p.pressures_kpa for p in by["paper"]], index=pd.Index(list(targets), name="exercise"), columns=PRESSURE_NAMES
+    )
+    out = validation.compare_planners(ds, {"table08": table})
+    med = out["planner_median_rel_error"].sel(table="table08")
+    assert float(med.sel(planner="paper")) == pytest.approx(0.0, abs=1e-12)
+    assert float(out["planner_worst_rel_error"].sel(planner="paper", table="table08")) == pytest.approx(0.0, abs=1e-12)
+    assert float(med.sel(planner="least_pressure")) > 0.1
+    reached = out["planner_reached"].sel(table="table08")
+    np.testing.assert_array_equal(reached.sel(planner="paper").values, [p.achieved for p in by["paper"]])
+
+
 def test_unreachable_target_is_marked_with_a_reason():
     m = model()
     plan = planning.plan_exercise(m, [90, 100, 80], tol_deg=5.0, active_limits_nm=LIMITS)

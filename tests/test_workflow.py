@@ -72,6 +72,14 @@ def test_smoke_outputs(smoke):
             assert fc.attrs["patient"] == patient and set(fc["exercise"].values) == {"TGE2"}
             dims[patient] = fc["finger_dimension_mm"].to_series()
     assert dims["p01"]["L3PP"] == pytest.approx(52.0) and dims["mean"]["L3PP"] != pytest.approx(52.0)
+    # every planner's plans beside the chosen one's, each scored against Tables 8 and 10
+    with xr.open_dataset(res / "patients" / "mean" / "cascade_plan.nc") as pl:
+        assert list(pl["planner"].values) == ["least_pressure", "stiffness", "paper"]
+        chosen = pl["planner_pressure_kpa"].sel(planner=pl.attrs["planner"])
+        assert (abs(chosen - pl["pressure_kpa"]) < 1e-9).all()
+    with xr.open_dataset(res / "validation" / "cascade.nc") as v:
+        assert set(v["table"].values) == {"table08", "table10"}
+        assert v["planner_median_rel_error"].notnull().all()
     # the stiffness study on the chain: every solve converged, co-pressurising stiffens, the unit model beside it
     with xr.open_dataset(res / "actuator" / "unit_stiffness.nc") as st:
         assert (st["status"] == 0).all() and "git_commit" in st.attrs

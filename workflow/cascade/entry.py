@@ -14,9 +14,9 @@ import xarray as xr
 
 from workflow.actuator.sampled_region import flag_pressure_table
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
-from workflow.cascade.planning import plan_exercise, plans_dataset
+from workflow.cascade.planning import PLANNERS, plan_exercise, planners_dataset, plans_dataset
 from workflow.cascade.plots import plot_poses, plot_validation
-from workflow.cascade.validation import compare_pressures, compare_unit_moments, read_pressure_table
+from workflow.cascade.validation import compare_planners, compare_pressures, compare_unit_moments, read_pressure_table
 from workflow.common.constants import JOINTS
 from workflow.common.provenance import open_result, write_dataset
 
@@ -79,11 +79,23 @@ def write_cascade_plan(
     limit = plan_limit(c, unit, material_limit)
     log.info("patient %s: every planned pressure <= %s", patient_name, limit)
     t0 = time.perf_counter()
+    chosen = str(c.get("planner", "least_pressure"))
+    by_planner = {}
+    for planner in PLANNERS:
+        if planner != chosen and planner == "stiffness" and not hasattr(unit, "stiffness_nm_per_deg"):
+            log.warning("patient %s: the unit model has no stiffness; the stiffness planner is left out", patient_name)
+            continue
+        opts = {**plan_options(c, limits, limit), "planner": planner}
+        by_planner[planner] = [plan_exercise(model, t, exercise=name, **opts) for name, t in targets.items()]
+        for p in by_planner[planner]:
+            if np.any(p.pressures_kpa > limit.kpa):  # the search is bounded: this is a bug, not a plan to write
+                raise RuntimeError(
+                    f"patient {patient_name} {p.exercise} ({planner}): planned {p.pressures_kpa.max():.1f} kPa "
+                    f"above {limit}"
+                )
     plans = []
-    for name, t in targets.items():
-        p = plan_exercise(model, t, exercise=name, **plan_options(c, limits, limit))
-        if np.any(p.pressures_kpa > limit.kpa):  # the search is bounded: this is a bug, not a plan to write
-            raise RuntimeError(f"patient {patient_name} {name}: planned {p.pressures_kpa.max():.1f} kPa above {limit}")
+    for p in by_planner[chosen]:
+        name, t = p.exercise, p.target_deg
         log.info(
             "%s: %s pressures %s kPa, predicted %s deg (target %s) %s",
             name,
@@ -103,14 +115,22 @@ def write_cascade_plan(
             "patient": patient_name,
             "finger": finger_name,
             "springs": spring_note,
-            "planning_wall_time_s": round(time.perf_counter() - t0, 3),
+            "planning_wall_time_s": round(time.perf_counter() - t0, 3),  # every planner's plans
             "p_limit_kpa": limit.kpa,
             "p_limit_source": limit.source,
-            "planner": str(c.get("planner", "least_pressure")),
+            "planner": chosen,
             "stiffness_margin": float(c.get("stiffness_margin", 1.0)),
             **dict(notes or {}),
         },
     )
+    ds = ds.merge(planners_dataset(by_planner))
+    for planner, pl in by_planner.items():
+        log.info(
+            "planner %s: reaches %s; pressures (kPa) %s",
+            planner,
+            [p.exercise for p in pl if p.achieved] or "none",
+            "; ".join(f"{p.exercise} {np.round(p.pressures_kpa).astype(int).tolist()}" for p in pl),
+        )
     if sampled_region is not None:
         # the surrogate is an extrapolation outside its samples: flag, do not stop
 
@@ -148,7 +168,9 @@ def write_cascade_validation(
 
     plan = open_result(plan_nc)
     plans = {"table10": open_result(dummy_plan_nc)} if dummy_plan_nc and "table10" in tables else None
-    ds = compare_pressures(plan, {k: read_pressure_table(v) for k, v in tables.items()}, rel_floor_kpa, plans)
+    refs = {k: read_pressure_table(v) for k, v in tables.items()}
+    ds = compare_pressures(plan, refs, rel_floor_kpa, plans)
+    ds = ds.merge(compare_planners(plan, refs, rel_floor_kpa, plans))
     if table07 is not None:
         ds = ds.merge(compare_unit_moments(plan, table07))
     ds.attrs["patient"] = str(plan.attrs.get("patient", ""))

@@ -17,6 +17,11 @@ Which of the pressures that bend a span within the goal a plan takes is the plan
   unit model) at least s times the load's, |d m*_X / d theta_X| (the joint spring less gravity, by central
   differences at the target pose). Where no pressures reach that, the stiffest of those that bend the span right.
   Co-pressurising both chambers of a group raises k_g at the same bend, which the least-pressure rule never does.
+* ``paper``: the paper's own rule (section 3.1, Tables 7 -> 8) on our unit targets: per span, every unit bends by
+  the same angle under the span's moment; the pressures start where the unit's *free* angle is that angle on the
+  top-pressure curve of the limit (Fig. 11 read at 300 kPa), and the top pressure alone then moves until the unit
+  gives that angle under the moment (the bottom held), see `_span_plan_paper`.  It co-pressurises every group that
+  is to stay (nearly) straight, as Tables 8 and 10 do.
 
 Pressures kPa, angles deg, moments N m.
 """
@@ -41,10 +46,10 @@ from workflow.cascade.model import (
 from workflow.cascade.stiffness import load_stiffness_nm_per_deg, span_stiffness_nm_per_deg
 from workflow.common.constants import CASCADE_EQUILIBRIUM_STATUS, CHAMBERS, GROUPS, JOINTS, PRESSURE_NAMES
 
-__all__ = ["PLANNERS", "Plan", "plan_exercise", "plan_patient", "plans_dataset"]
+__all__ = ["PLANNERS", "Plan", "plan_exercise", "plan_patient", "planners_dataset", "plans_dataset"]
 
 #: The planners of the module docstring.
-PLANNERS = ("least_pressure", "stiffness")
+PLANNERS = ("least_pressure", "stiffness", "paper")
 
 
 # --------------------------------------------------------------------------
@@ -69,6 +74,39 @@ class Plan:
     target_unit_angles_deg: np.ndarray
 
 
+def _span_setup(model, joint: int, m_req: float, target: float, tie: bool):
+    """The pressures a span's plan sets and its bend error as a function of them.
+
+    Returns ``idx`` (indices into the eight pressures the span's groups own; with ``tie`` the MCP pair drives CMC
+    too), ``full`` (P (n, k) kPa -> the eight pressures (n, 8)) and ``bend`` (P (n, k) -> the span's bend minus
+    ``target`` under the span moment ``m_req``, deg, the straps' compliance included).
+    """
+    groups = [GROUPS.index(g) for g in SPANS[JOINTS[joint]]]
+    idx = [2 * g + c for g in groups for c in (0, 1)]
+    if tie and joint == 0:
+        idx = [2, 3]
+    counts = model.span_counts()[joint]
+    comp = np.rad2deg(_strap_compliance(model)[joint] * m_req)
+
+    def full(P):
+        p8 = np.zeros((P.shape[0], 8))
+        p8[:, idx] = P
+        if tie and joint == 0:
+            p8[:, 0:2] = p8[:, 2:4]
+        return p8
+
+    def bend(P):
+        p8 = full(P)
+        out = np.full(P.shape[0], comp - target)
+        for g in range(4):
+            if counts[g]:
+                th = model.unit.angle_deg(p8[:, 2 * g], p8[:, 2 * g + 1], np.full(P.shape[0], m_req))
+                out += counts[g] * np.asarray(th, float)
+        return out
+
+    return idx, full, bend
+
+
 def _span_plan(
     model,
     joint: int,
@@ -89,29 +127,8 @@ def _span_plan(
     stiffness of at least that, else the stiffest feasible); otherwise the
     pressures closest to the target.
     """
-    groups = [GROUPS.index(g) for g in SPANS[JOINTS[joint]]]
-    idx = [2 * g + c for g in groups for c in (0, 1)]
-    if tie and joint == 0:
-        idx = [2, 3]  # MCP's pair drives CMC too
+    idx, full, bend = _span_setup(model, joint, m_req, target, tie)
     k = len(idx)
-    counts = model.span_counts()[joint]
-    comp = np.rad2deg(_strap_compliance(model)[joint] * m_req)
-
-    def full(P):  # P (n, k) kPa -> the eight pressures (n, 8)
-        p8 = np.zeros((P.shape[0], 8))
-        p8[:, idx] = P
-        if tie and joint == 0:
-            p8[:, 0:2] = p8[:, 2:4]
-        return p8
-
-    def bend(P):  # P (n, k) kPa -> span bend error (n,)
-        p8 = full(P)
-        out = np.full(P.shape[0], comp - target)
-        for g in range(4):
-            if counts[g]:
-                th = model.unit.angle_deg(p8[:, 2 * g], p8[:, 2 * g + 1], np.full(P.shape[0], m_req))
-                out += counts[g] * np.asarray(th, float)
-        return out
 
     def search(lo, hi, n):
         axes = [np.linspace(l, h, n) for l, h in zip(lo, hi)]
@@ -142,6 +159,64 @@ def _span_plan(
         P, e, feas = search(lo, hi, n_f)
         step = step * 2 / (n_f - 1)
     return dict(zip(idx, P)), e
+
+
+def _crossing(f: np.ndarray, x: np.ndarray, x0: float) -> float | None:
+    """The zero of samples ``f`` on the grid ``x`` nearest ``x0`` (linear between the samples), or None.
+
+    Samples within round-off of zero count as zeros (the free angle on the diagonal P_T = P_B is 0 only to 1e-16).
+    """
+    s = np.where(np.abs(f) <= 1e-9 * max(float(np.max(np.abs(f))), 1e-300), 0.0, np.sign(f))
+    zeros = list(x[s == 0])
+    i = np.flatnonzero(s[:-1] * s[1:] < 0)
+    zeros += list(x[i] - f[i] * (x[i + 1] - x[i]) / (f[i + 1] - f[i]))
+    if not zeros:
+        return None
+    zeros = np.asarray(zeros, float)
+    return float(zeros[np.argmin(np.abs(zeros - x0))])
+
+
+def _span_plan_paper(
+    model, joint: int, m_req: float, target: float, p_max: float, tie: bool, n: int = 601
+) -> tuple[dict[int, float], float]:
+    """The paper's rule for one span (section 3.1, Figs. 11a-b, Tables 7 -> 8), applied to our unit targets.
+
+    Every unit of the span gets the same pressures and the same targets: the angle
+    theta_u = (span bend target - strap compliance) / units in the span, and the span moment ``m_req`` (N m per
+    unit, the Table 7 analogue).  (a) On the unit's top-pressure curve at the limit (Fig. 11 at 300 kPa), the
+    pressure ratio whose *free* angle is theta_u: P_T = p_max and P_B from theta_f(P_T, P_B) = theta_u (mirrored,
+    P_B = p_max, for theta_u < 0; P_B = 0 where even that bends too little).  (b) The moment the unit must deliver is
+    then added by moving the top pressure alone, the bottom held (the paper: along the top pressure's axis, the
+    stiffness kept): the P_T nearest (a) with theta(P_T, P_B, m_req) = theta_u.  Where no P_T in [0, p_max] does,
+    the bottom pressure moves instead, the top held; where neither, the pressures of (a) stand and the span misses
+    its target.  Returns {index into the eight pressures: kPa} and the span's bend error (deg).
+    """
+    idx, full, bend = _span_setup(model, joint, m_req, target, tie)
+    counts = model.span_counts()[joint]
+    n_units = int(sum(counts[GROUPS.index(g)] for g in SPANS[JOINTS[joint]]))
+    comp = np.rad2deg(_strap_compliance(model)[joint] * m_req)
+    theta_u = (target - comp) / max(n_units, 1)
+    unit = model.unit
+    x = np.linspace(0.0, p_max, n)
+    full_p = np.full(n, p_max)
+    # (a) the free angle's point on the limit's top-pressure curve
+    if theta_u >= 0:
+        b = _crossing(np.asarray(unit.free_angle_deg(full_p, x), float) - theta_u, x, p_max)
+        pt, pb = p_max, (0.0 if b is None else b)
+    else:
+        t = _crossing(np.asarray(unit.free_angle_deg(x, full_p), float) - theta_u, x, p_max)
+        pt, pb = (0.0 if t is None else t), p_max
+    # (b) the moment: the top moves, the bottom held; else the bottom moves, the top held
+    m = np.full(n, m_req)
+    t = _crossing(np.asarray(unit.angle_deg(x, np.full(n, pb), m), float) - theta_u, x, pt)
+    if t is not None:
+        pt = t
+    else:
+        b = _crossing(np.asarray(unit.angle_deg(np.full(n, pt), x, m), float) - theta_u, x, pb)
+        pb = pb if b is None else b
+    pair = np.array([pt, pb])
+    P = np.tile(pair, len(idx) // 2)[None, :]
+    return dict(zip(idx, P[0])), float(bend(P)[0])
 
 
 def plan_exercise(
@@ -188,9 +263,12 @@ def plan_exercise(
         p8 = np.zeros(8)
         span_err = np.zeros(3)
         for j in range(3):
-            sol, span_err[j] = _span_plan(
-                model, j, m_eval[j], target[j], goal, p_max_kpa, tie_cmc_mcp, k_required=k_req[j]
-            )
+            if planner == "paper":
+                sol, span_err[j] = _span_plan_paper(model, j, m_eval[j], target[j], p_max_kpa, tie_cmc_mcp)
+            else:
+                sol, span_err[j] = _span_plan(
+                    model, j, m_eval[j], target[j], goal, p_max_kpa, tie_cmc_mcp, k_required=k_req[j]
+                )
             for i, v in sol.items():
                 p8[i] = v
         if tie_cmc_mcp:
@@ -208,6 +286,8 @@ def plan_exercise(
             if np.max(np.abs(new_eval - theta_eval)) < 0.1:
                 break
             theta_eval = new_eval
+        elif planner == "paper":  # its spans hit their bends exactly: a smaller goal changes nothing
+            break
         else:
             goal *= 0.5
     p8, eq, _ = best
@@ -396,3 +476,44 @@ def plans_dataset(
         }
     )
     return ds
+
+
+def planners_dataset(by_planner: Mapping[str, Sequence[Plan]]):
+    """Every planner's plans side by side (``planner`` dimension): pressures, predicted angles, reached.
+
+    ``by_planner``: {planner: its plans of the same exercises, in the same order}.  The plan's own variables
+    (``pressure_kpa`` ...) are the configured planner's; these let the validation compare the planners.
+    """
+    import xarray as xr
+
+    names = list(by_planner)
+    ex = [p.exercise for p in by_planner[names[0]]]
+    for name in names:
+        if [p.exercise for p in by_planner[name]] != ex:
+            raise ValueError(f"planner {name!r} planned other exercises than {names[0]!r}")
+    return xr.Dataset(
+        {
+            "planner_pressure_kpa": (
+                ("planner", "exercise", "group", "chamber"),
+                np.array([[pressures_table(p.pressures_kpa) for p in by_planner[n]] for n in names]),
+                {"units": "kPa", "long_name": "chamber pressure each planner plans"},
+            ),
+            "planner_predicted_angle_deg": (
+                ("planner", "exercise", "joint"),
+                np.array([[p.equilibrium.joint_angles_deg for p in by_planner[n]] for n in names]),
+                {"units": "degree", "long_name": "joint angle at equilibrium under each planner's pressures"},
+            ),
+            "planner_achieved": (
+                ("planner", "exercise"),
+                np.array([[p.achieved for p in by_planner[n]] for n in names]),
+                {"long_name": "exercise reached by each planner's plan (reduced-order chain)"},
+            ),
+        },
+        coords={
+            "planner": names,
+            "exercise": ex,
+            "group": list(GROUPS),
+            "chamber": list(CHAMBERS),
+            "joint": list(JOINTS),
+        },
+    )

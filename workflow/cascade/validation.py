@@ -23,7 +23,7 @@ from workflow.actuator.mapping import read_unit_moments
 from workflow.cascade.model import SPANS
 from workflow.common.constants import GROUPS, PRESSURE_NAMES
 
-__all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "compare_unit_moments"]
+__all__ = ["PAPER_REACHED", "read_pressure_table", "compare_pressures", "compare_planners", "compare_unit_moments"]
 
 #: Exercises the paper reached, per set.
 PAPER_REACHED: Mapping[str, Sequence[str]] = {
@@ -126,6 +126,68 @@ def compare_pressures(
     )
     ds.attrs["rel_floor_kpa"] = rel_floor_kpa
     return ds
+
+
+def compare_planners(
+    plan: xr.Dataset,
+    references: Mapping[str, pd.DataFrame],
+    rel_floor_kpa: float = 10.0,
+    plans: Mapping[str, xr.Dataset] | None = None,
+) -> xr.Dataset:
+    """Every planner's distance to each reference table (the ``planner_*`` variables of a plan).
+
+    Per planner and table: the median and worst relative error over the table's cells of at least ``rel_floor_kpa``
+    (its nonzero cells), the mean absolute error over all its cells (kPa), and which exercises the planner's plan
+    reaches in the reduced-order chain.  ``plans`` as in :func:`compare_pressures` (Table 10 with the dummy's plan).
+    An empty dataset where the plans carry no ``planner`` dimension.
+    """
+    plans = dict(plans or {})
+    names = list(references)
+    compared = [plans.get(n, plan) for n in names]
+    if any("planner_pressure_kpa" not in pl for pl in compared):
+        return xr.Dataset()
+    planners = [p for p in plan["planner"].values if all(p in pl["planner"].values for pl in compared)]
+    ex = [str(e) for e in plan["exercise"].values]
+    med = np.full((len(planners), len(names)), np.nan)
+    worst, mae = med.copy(), med.copy()
+    reached = np.zeros((len(planners), len(names), len(ex)), bool)
+    for r, (name, pl) in enumerate(zip(names, compared)):
+        tab = references[name]
+        ref = np.array([tab.loc[e].values if e in tab.index else np.full(8, np.nan) for e in ex])
+        for i, planner in enumerate(planners):
+            ours = pl["planner_pressure_kpa"].sel(planner=planner, exercise=ex).values.reshape(len(ex), 8)
+            err = np.abs(ours - ref)
+            big = ref >= rel_floor_kpa
+            rel = err[big] / ref[big]
+            if rel.size:
+                med[i, r], worst[i, r] = np.median(rel), np.max(rel)
+            mae[i, r] = np.nanmean(err)
+            reached[i, r] = pl["planner_achieved"].sel(planner=planner, exercise=ex).values.astype(bool)
+    return xr.Dataset(
+        {
+            "planner_median_rel_error": (
+                ("planner", "table"),
+                med,
+                {"units": "1", "long_name": f"median |ours - paper| / paper over cells >= {rel_floor_kpa:g} kPa"},
+            ),
+            "planner_worst_rel_error": (
+                ("planner", "table"),
+                worst,
+                {"units": "1", "long_name": f"largest |ours - paper| / paper over cells >= {rel_floor_kpa:g} kPa"},
+            ),
+            "planner_mean_abs_error": (
+                ("planner", "table"),
+                mae,
+                {"units": "kPa", "long_name": "mean |ours - paper| over all the table's cells"},
+            ),
+            "planner_reached": (
+                ("planner", "table", "exercise"),
+                reached,
+                {"long_name": "exercise reached by the planner's plan compared with the table (reduced-order chain)"},
+            ),
+        },
+        coords={"planner": planners, "table": names, "exercise": ex},
+    )
 
 
 def compare_unit_moments(plan: xr.Dataset, table07: str | Path) -> xr.Dataset:
