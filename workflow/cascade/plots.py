@@ -87,14 +87,16 @@ def plot_poses(model: CascadeModel, plans: Sequence[Plan], out: str | Path, titl
 
 
 def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
-    """Our pressures beside the paper's, one panel per exercise."""
+    """Our pressures beside the paper's, one panel per exercise; a row per table with every planner's, if stored."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     ex = list(ds["exercise"].values)
-    fig, axes = plt.subplots(1, len(ex), figsize=(3.0 * len(ex), 3.0), sharey=True, squeeze=False)
+    planner_tables = list(ds["table"].values) if "planner_ours" in ds else []
+    rows = 1 + len(planner_tables)
+    fig, axes = plt.subplots(rows, len(ex), figsize=(3.0 * len(ex), 3.0 * rows), sharey=True, squeeze=False)
     x = np.arange(8)
     w = 0.8 / (1 + ds.sizes["table"])
     per_table = "table" in ds["ours"].dims
@@ -110,10 +112,26 @@ def plot_validation(ds: xr.Dataset, out: str | Path) -> None:
                 ax.bar(x - 0.4 + w * (k + 1.5), ds["reference"].sel(table=r, exercise=e), w, label=str(r))
         reached = bool(ds["ours_achieved"].sel(exercise=e))
         ax.set_title(f"{e} ({'reached' if reached else 'not reached'} by ours)", fontsize=8)
+    for row, table in enumerate(planner_tables, start=1):
+        planners = list(ds["planner"].values)
+        wp = 0.8 / (1 + len(planners))
+        for ax, e in zip(axes[row], ex):
+            ax.bar(x - 0.4 + wp / 2, ds["reference"].sel(table=table, exercise=e), wp, color="k", label=str(table))
+            for k, pl in enumerate(planners):
+                med = float(ds["planner_median_rel_error"].sel(planner=pl, table=table))
+                ax.bar(
+                    x - 0.4 + wp * (k + 1.5),
+                    ds["planner_ours"].sel(planner=pl, table=table, exercise=e),
+                    wp,
+                    label=f"{pl} (median {100 * med:.0f} % off)",
+                )
+            ax.set_title(f"{e}: planners against {table}", fontsize=8)
+    for ax in axes.ravel():
         ax.set_xticks(x, [p[2:] for p in ds["pressure"].values], rotation=90, fontsize=6)
         ax.tick_params(labelsize=6)
-    axes[0, 0].set_ylabel("pressure (kPa)", fontsize=7)
-    axes[0, 0].legend(fontsize=6)
+    for row in range(rows):
+        axes[row, 0].set_ylabel("pressure (kPa)", fontsize=7)
+        axes[row, 0].legend(fontsize=6)
     fig.tight_layout()
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=130)

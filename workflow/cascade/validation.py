@@ -151,11 +151,13 @@ def compare_planners(
     med = np.full((len(planners), len(names)), np.nan)
     worst, mae = med.copy(), med.copy()
     reached = np.zeros((len(planners), len(names), len(ex)), bool)
+    pressures = np.full((len(planners), len(names), len(ex), 8), np.nan)
     for r, (name, pl) in enumerate(zip(names, compared)):
         tab = references[name]
         ref = np.array([tab.loc[e].values if e in tab.index else np.full(8, np.nan) for e in ex])
         for i, planner in enumerate(planners):
             ours = pl["planner_pressure_kpa"].sel(planner=planner, exercise=ex).values.reshape(len(ex), 8)
+            pressures[i, r] = ours
             err = np.abs(ours - ref)
             big = ref >= rel_floor_kpa
             rel = err[big] / ref[big]
@@ -180,13 +182,18 @@ def compare_planners(
                 mae,
                 {"units": "kPa", "long_name": "mean |ours - paper| over all the table's cells"},
             ),
+            "planner_ours": (
+                ("planner", "table", "exercise", "pressure"),
+                pressures,
+                {"units": "kPa", "long_name": "each planner's pressure, from the plan compared with the table"},
+            ),
             "planner_reached": (
                 ("planner", "table", "exercise"),
                 reached,
                 {"long_name": "exercise reached by the planner's plan compared with the table (reduced-order chain)"},
             ),
         },
-        coords={"planner": planners, "table": names, "exercise": ex},
+        coords={"planner": planners, "table": names, "exercise": ex, "pressure": list(PRESSURE_NAMES)},
     )
 
 
