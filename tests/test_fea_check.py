@@ -519,3 +519,41 @@ def test_a_stalled_whole_actuator_solve_is_retried_with_the_restarts_over_each_o
     seen.clear()
     res = FC.solve_with_restarts(SimpleNamespace(setup=Setup(), restarts=restarts[:1]), {}, {"max_step": 0.25})
     assert res.status == 1 and res.load_factor == pytest.approx(0.5)  # the furthest of the two attempts
+
+
+def test_an_exercise_ramps_from_the_gravity_state_with_the_contact_band_that_state_converged_with(monkeypatch):
+    """Gravity converged only with the restart's wider band: the exercise's first attempt keeps that band (a
+    narrower one would put the nodes resting inside the wide band deep into the penalty), its restarts apply over it."""
+    from dataclasses import dataclass, field
+    from types import SimpleNamespace
+
+    from workflow.fea_check import check as FC
+
+    @dataclass
+    class Setup:
+        contact: dict = field(default_factory=lambda: {"smoothing_mm": 0.01, "penalty": 100})
+
+    seen = []
+
+    def fake_solve(setup, pressures, solver=None, u_gravity=None):
+        seen.append((dict(setup.contact), solver.get("max_step")))
+        ok = not pressures or solver.get("max_step") == 0.02  # the pressure phase passes on its restart
+        lam = 1.0 if ok else 0.5
+        return SimpleNamespace(
+            status=0 if ok else 1,
+            load_factor=lam,
+            contact=dict(setup.contact),
+            state="g",
+            history=[],
+            spring_moments=np.zeros(3),
+            gravity_moments=np.zeros(3),
+            max_strap_force={},
+            joint_angles_deg=np.zeros(3),
+        )
+
+    monkeypatch.setattr(FC, "solve_coupled", fake_solve)
+    restarts = ({"contact": {"smoothing_mm": 0.1}, "solver": {"max_step": 0.02}},)
+    fea = SimpleNamespace(setup=Setup(), restarts=restarts, width_mm=20.0)
+    gravity = SimpleNamespace(state="g", contact={"smoothing_mm": 0.1, "penalty": 100})
+    FC.check_exercise(fea, "TGE1", np.full((4, 2), 50.0), {"max_step": 0.25}, gravity=gravity)
+    assert seen == [({"smoothing_mm": 0.1, "penalty": 100}, 0.25), ({"smoothing_mm": 0.1, "penalty": 100}, 0.02)]

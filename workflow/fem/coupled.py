@@ -313,6 +313,7 @@ class CoupledResult:
     history: list = field(default_factory=list)
     u: np.ndarray | None = field(default=None, repr=False)
     state: np.ndarray | None = field(default=None, repr=False)  # u and the enhanced parameters
+    contact: dict = field(default_factory=dict)  # the contact settings the state is an equilibrium of
 
 
 def _gravity_moments(setup: CoupledSetup, x: np.ndarray, lam_g: float) -> np.ndarray:
@@ -430,6 +431,7 @@ def solve_coupled(
         history=history,
         u=u[: model.n].copy(),
         state=u,
+        contact=dict(setup.contact or {}),
     )
 
 
