@@ -27,7 +27,7 @@ import resource
 import sys
 from pathlib import Path
 
-from workflow.cascade import patient, planning
+from workflow.cascade import patient, planning, plans_data
 
 OUT = Path(__file__).resolve().parent / "out"
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,7 +66,7 @@ def _case(h: float, exercises: list[str], plan_path: str | None, surrogates, q):
     else:
         model = C.build_cascade(finger, LinearUnit(), actuator_dims_mm=ACTUATOR)
         tg = {e: [v["mcp"], v["pip"], v["dip"]] for e, v in cfg["exercises"].items()}
-        plan = planning.plans_dataset(
+        plan = plans_data.plans_dataset(
             model, planning.plan_patient(model, tg, tol_deg=5.0), tol_deg=5.0, active_limits_nm=None
         )
     upg = {g: int(v) for g, v in zip(plan["group"].values, plan["units_per_group"].values)}

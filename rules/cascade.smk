@@ -5,6 +5,7 @@
 
 rule cascade_plan:
     input:
+        unpack(get_chain_calibration),
         unit_response=get_unit_response(),
         # the sweep behind the surrogate: planned pressures outside its converged samples are flagged
         response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),

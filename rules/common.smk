@@ -235,6 +235,32 @@ def get_fea_surrogates(wildcards):
     return {f"surrogate_{f}": f"results/actuator/surrogate_{f}.joblib" for f in ("2d", "3d")}
 
 
+def get_calibration_patient():
+    """Whose finger the chain's calibration runs on (cascade.calibration.patient, else the validation patient)."""
+    c = config["cascade"]
+    return c["calibration"].get("patient") or c["validation_patient"]
+
+
+def get_calibration_slice(wildcards):
+    """Param function: the config the chain's calibration depends on (not the plans': it runs upstream of them)."""
+    name = get_calibration_patient()
+    return {
+        "patient": {name: config["patients"][name]},
+        "anthropometry": config["anthropometry"],
+        "cascade": {k: v for k, v in config["cascade"].items() if k not in ("planner", "stiffness_margin")},
+        "unit_model": config["surrogates"]["unit_model"],
+        "actuator": config["actuator"],
+        "fea_check": config["fea_check"],
+    }
+
+
+def get_chain_calibration(wildcards):
+    """Input function: the chain's calibration, when the plans use it (cascade.calibration.use)."""
+    if config["cascade"]["calibration"]["use"]:
+        return {"calibration": "results/validation/chain_calibration.nc"}
+    return {}
+
+
 def get_fea_check_slice(wildcards):
     """Param function: the config one patient's FEA check depends on."""
     return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": config["fea_check"]}

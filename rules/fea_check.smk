@@ -7,6 +7,7 @@
 #   get_fea_check_slice(wc)  -> the config a patient's check depends on
 #   get_standalone_parts(wc) -> the stand-alone exercises solved apart (one job each: two 3D solves run at once)
 #   CHECKED                  -> the patients the default run checks (fea_check.patients); check_<patient> for any
+#   get_calibration_patient() -> whose finger the chain's calibration runs on (cascade.calibration.patient)
 
 
 rule fea_check:
@@ -90,6 +91,49 @@ rule standalone_actuator:
         config_slice=get_fea_check_slice,
     script:
         "../workflow/scripts/standalone_actuator.py"
+
+
+# The reduced-order chain calibrated to the 2D FEA at pressure sets fixed in advance (upstream of the plans: it
+# needs no plan). The plans use it with cascade.calibration.use; alone: snakemake -c2 calibrate_chain.
+rule chain_calibration:
+    input:
+        unpack(get_fea_surrogates),
+        ccd="results/doe/ccd.nc",
+        moments="results/musculoskeletal/moments.nc",
+        joint_loads=lambda wc: f"results/patients/{get_calibration_patient()}/joint_loads.nc",
+        table08="resources/table08_planned_pressures_3d.csv",
+        code=code_files("scripts.chain_calibration"),
+    output:
+        nc="results/validation/chain_calibration.nc",
+        plot=report(
+            "results/validation/chain_calibration.png",
+            caption="../report/chain_calibration.rst",
+            category="FEA check",
+        ),
+    log:
+        "logs/fea_check/chain_calibration.log",
+    benchmark:
+        "results/benchmarks/rules/chain_calibration.tsv"
+    conda:
+        "../envs/project.yaml"
+    params:
+        patient_name=get_calibration_patient(),
+        patient=config["patients"][get_calibration_patient()],
+        calibration=config["cascade"]["calibration"],
+        fea_check=config["fea_check"],
+        actuator=config["actuator"],
+        cascade=config["cascade"],
+        anthropometry=config["anthropometry"],
+        unit_model=config["surrogates"]["unit_model"],
+        config_slice=get_calibration_slice,
+    script:
+        "../workflow/scripts/chain_calibration.py"
+
+
+rule calibrate_chain:
+    input:
+        "results/validation/chain_calibration.nc",
+    localrule: True
 
 
 # One target per patient (snakemake -c2 check_<patient>): the default run checks fea_check.patients only.

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from _doubles import DENSITIES, mean_finger
 
-from workflow.cascade import entry, kinematics, planning, stiffness
+from workflow.cascade import entry, kinematics, planning, plans_data, stiffness
 from workflow.cascade import finger as F
 from workflow.cascade import model as C
 
@@ -237,8 +237,8 @@ def test_planner_comparison_scores_each_planner_against_a_table():
     m = model()
     targets = {"TGE1": [0, 0, 0], "TGE2": [60, 0, 0], "TGE3": [60, 40, 0]}
     by = {pl: planning.plan_patient(m, targets, active_limits_nm=LIMITS, planner=pl) for pl in planning.PLANNERS}
-    ds = planning.plans_dataset(m, by["least_pressure"], tol_deg=5.0, active_limits_nm=LIMITS).merge(
-        planning.planners_dataset(by)
+    ds = plans_data.plans_dataset(m, by["least_pressure"], tol_deg=5.0, active_limits_nm=LIMITS).merge(
+        plans_data.planners_dataset(by)
     )
     assert list(ds["planner"].values) == list(planning.PLANNERS)
     np.testing.assert_allclose(
@@ -313,7 +313,7 @@ def test_plan_dataset_roundtrip_and_validation(tmp_path):
     m = model()
     targets = {"TGE1": [0, 0, 0], "TGE2": [90, 0, 0], "TGE4": [90, 100, 80]}
     plans = planning.plan_patient(m, targets, tol_deg=5.0, active_limits_nm=LIMITS)
-    ds = planning.plans_dataset(m, plans, tol_deg=5.0, active_limits_nm=LIMITS)
+    ds = plans_data.plans_dataset(m, plans, tol_deg=5.0, active_limits_nm=LIMITS)
     path = write_dataset(ds, tmp_path / "plan.nc", rule="test", config_slice={}, title="t")
     back = xr.load_dataset(path)
     for v in ("pressure_kpa", "target_angle_deg", "predicted_angle_deg", "achieved", "reason"):

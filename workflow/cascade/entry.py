@@ -13,8 +13,10 @@ import numpy as np
 import xarray as xr
 
 from workflow.actuator.sampled_region import flag_pressure_table
+from workflow.cascade.calibration import calibrated
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
-from workflow.cascade.planning import PLANNERS, plan_exercise, planners_dataset, plans_dataset
+from workflow.cascade.planning import PLANNERS, plan_exercise
+from workflow.cascade.plans_data import planners_dataset, plans_dataset
 from workflow.cascade.plots import plot_poses, plot_validation
 from workflow.cascade.validation import compare_planners, compare_pressures, compare_unit_moments, read_pressure_table
 from workflow.common.constants import JOINTS
@@ -40,8 +42,12 @@ def write_cascade_plan(
     sampled_region: Any = None,
     notes: Mapping[str, str] | None = None,
     material_limit: Any = None,
+    calibration_nc: str | None = None,
 ):
     """Build the patient's finger and actuator, plan every exercise, write the plan (and poses plot).
+
+    ``calibration_nc``: the chain's calibration (``chain_calibration.nc``), whose span gains and compliances the
+    chain then plans with; stored as ``chain_span_gain`` and ``chain_span_compliance_rad_per_nm`` either way.
 
     ``unit`` is the unit response object (see :class:`UnitResponse`);
     ``cascade_cfg`` the config's ``cascade`` section; ``material_limit`` the
@@ -64,6 +70,17 @@ def write_cascade_plan(
     )
     finger_name = str(patient.get("finger", "F3"))
     model = patient_cascade(fing, unit, c)
+    chain_note = "the paper's chain (no calibration)"
+    if calibration_nc is not None:
+        cal = open_result(calibration_nc)
+        model = calibrated(model, cal["span_gain"].values, cal["span_compliance_rad_per_nm"].values)
+        chain_note = (
+            f"calibrated to the 2D FEA of patient {cal.attrs.get('patient', '?')}: gains "
+            f"{np.round(model.span_gain, 3).tolist()}, compliances {np.round(model.span_compliance_rad_per_nm, 3).tolist()} "
+            f"rad/N m; held-out error {cal.attrs.get('max_error_held_out_before_deg', np.nan):.1f} -> "
+            f"{cal.attrs.get('max_error_held_out_after_deg', np.nan):.1f} deg"
+        )
+    log.info("patient %s: chain: %s", patient_name, chain_note)
     limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
     targets = {
         str(e): loads["target_angle_deg"].sel(exercise=e, joint=list(JOINTS)).values for e in loads["exercise"].values
@@ -124,6 +141,17 @@ def write_cascade_plan(
         },
     )
     ds = ds.merge(planners_dataset(by_planner))
+    ds["chain_span_gain"] = (
+        "joint",
+        np.asarray(model.span_gain, float),
+        {"units": "1", "long_name": "share of each span's bend that turns its joint (1: the paper's chain)"},
+    )
+    ds["chain_span_compliance_rad_per_nm"] = (
+        "joint",
+        np.asarray(model.span_compliance_rad_per_nm, float),
+        {"units": "rad / (N m)", "long_name": "span rotation per span moment beyond the straps' give"},
+    )
+    ds.attrs["chain"] = chain_note
     for planner, pl in by_planner.items():
         log.info(
             "planner %s: reaches %s; pressures (kPa) %s",

@@ -25,6 +25,8 @@ static equilibrium that can be solved for any pressures:
   line: 8.43 and 5.67 mm for the mean finger, the paper's dummy-finger arms):
   strap force ``m_X / a_X`` and give ``m_X / (k a_X^2)`` of extra span rotation.
   The MCP span is held by the sliding support at the hand end (no give).
+* **Calibration** (optional, :mod:`workflow.cascade.calibration`): a joint turns by ``g_X`` times its span's
+  units' bend plus ``c_X m_X`` beyond the straps' give; ``g = 1``, ``c = 0`` is the paper's chain.
 * **Equilibrium** of the finger+actuator section at each joint:
   ``spring_X(theta_X) = G_X(theta) + m_X``, where ``G_X`` is the flexion
   moment of gravity about X of the phalanges and of the actuator units distal
@@ -154,6 +156,11 @@ class CascadeModel:
     strap_arm_m: np.ndarray
     gravity_m_s2: float
     n_per_group: dict[str, int] = field(default_factory=dict)
+    #: per joint's span: the share of its units' bend that turns the joint, and extra rotation per N m of span moment
+    #: beyond the straps' give (rad / N m); 1 and 0 as the paper's chain has them, fitted to the FEA by
+    #: :mod:`workflow.cascade.calibration`
+    span_gain: np.ndarray = field(default_factory=lambda: np.ones(3))
+    span_compliance_rad_per_nm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def n_units(self) -> int:
@@ -267,6 +274,11 @@ def _strap_compliance(model: CascadeModel) -> np.ndarray:
     return np.where(np.isfinite(c), c, 0.0)
 
 
+def _span_compliance(model: CascadeModel) -> np.ndarray:
+    """Span rotation per unit moment beyond the units' bend (rad per N m): the straps' give and the calibrated rest."""
+    return _strap_compliance(model) + np.asarray(model.span_compliance_rad_per_nm, float)
+
+
 def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit angles per group (4,) and span bends (3,) in deg under span moments ``m_nm``."""
     pt = pressures_table(p8)
@@ -275,7 +287,9 @@ def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> t
     mm = np.tile(np.asarray(m_nm, float), 4)
     th = np.asarray(model.unit.angle_deg(pg[:, 0], pg[:, 1], mm), float).reshape(4, 3)  # (group, joint)
     counts = model.span_counts()  # (joint, group)
-    span = np.sum(counts * th.T, axis=1) + np.rad2deg(_strap_compliance(model) * m_nm)
+    span = np.asarray(model.span_gain, float) * np.sum(counts * th.T, axis=1) + np.rad2deg(
+        _span_compliance(model) * m_nm
+    )
     unit_g = np.array([th[g, [j for j, jn in enumerate(JOINTS) if GROUPS[g] in SPANS[jn]][0]] for g in range(4)])
     return unit_g, span
 

@@ -16,6 +16,7 @@ import xarray as xr
 
 from workflow.actuator.pressure_limit import material_limit
 from workflow.actuator.unit_model import load_unit_model
+from workflow.cascade.calibration import calibrated
 from workflow.cascade.finger import Finger
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
 from workflow.common.constants import GROUPS, JOINTS
@@ -131,6 +132,9 @@ def write_fea_check(
         ro_plan = patient_cascade(
             finger, load_unit_model(units[cascade_cfg.get("surrogate", "3d")], **unit_model_cfg), cascade_cfg, upg
         )
+        if "chain_span_gain" in plan:  # the chain the plan was made with (calibrated or the paper's)
+            gain, comp = plan["chain_span_gain"].values, plan["chain_span_compliance_rad_per_nm"].values
+            ro_2d, ro_plan = calibrated(ro_2d, gain, comp), calibrated(ro_plan, gain, comp)
     # the 2D pressures: the paper's free-angle map, or the angles matched under the moment each unit carries
     m_units = None
     if a3 is not None and fea_cfg.get("pressure_map", "free_angle") == "loaded":

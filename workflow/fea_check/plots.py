@@ -166,3 +166,35 @@ def plot_standalone(ds: xr.Dataset, out: str | Path, title: str = "") -> None:
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=130)
     plt.close(fig)
+
+
+def plot_chain_calibration(ds: xr.Dataset, out: str | Path) -> None:
+    """Chain against FEA joint angles, before and after the calibration: the fit states and the held-out ones."""
+    fig, axes = plt.subplots(1, 2, figsize=(9, 4.2), sharex=True, sharey=True)
+    colors = {"MCP": "C0", "PIP": "C1", "DIP": "C2"}
+    for ax, role in zip(axes, ("fit", "held_out")):
+        sel = ds["role"] == role
+        for joint, c in colors.items():
+            fea = ds["angle_fea_deg"].sel(joint=joint).where(sel, drop=True)
+            for stage, marker, fill in (("before", "o", "none"), ("after", "s", c)):
+                chain = ds[f"angle_chain_{stage}_deg"].sel(joint=joint).where(sel, drop=True)
+                ax.scatter(fea, chain, marker=marker, facecolors=fill, edgecolors=c, s=18, label=f"{joint} {stage}")
+        lo = float(min(ds["angle_fea_deg"].min(), ds["angle_chain_before_deg"].min(), -5))
+        hi = float(max(ds["angle_fea_deg"].max(), ds["angle_chain_before_deg"].max(), 5))
+        ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
+        for d in (-5, 5):
+            ax.plot([lo, hi], [lo + d, hi + d], "k:", lw=0.6)
+        err = ds["error_before_deg"].where(sel), ds["error_after_deg"].where(sel)
+        ax.set_title(
+            f"{role.replace('_', ' ')}: largest |chain - FEA| {float(abs(err[0]).max()):.1f} -> "
+            f"{float(abs(err[1]).max()):.1f} deg",
+            fontsize=8,
+        )
+        ax.set_xlabel("FEA joint angle (deg)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0].set_ylabel("chain joint angle (deg)", fontsize=8)
+    axes[0].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=130)
+    plt.close(fig)

@@ -33,5 +33,6 @@ write_cascade_plan(
     rule=snakemake.rule,  # noqa: F821
     sampled_region=region,
     notes=notes,
+    calibration_nc=i.get("calibration"),
     material_limit=material_limit(p.pressure_limit),
 )
