@@ -196,6 +196,8 @@ def run_chain_calibration(
         {
             "rms_fit_before_deg": cal.rms_before_deg,
             "rms_fit_after_deg": cal.rms_after_deg,
+            "rms_held_out_before_deg": float(np.sqrt(np.nanmean(err_b[held] ** 2))) if held.any() else np.nan,
+            "rms_held_out_after_deg": float(np.sqrt(np.nanmean(err_a[held] ** 2))) if held.any() else np.nan,
             "max_error_held_out_before_deg": float(np.nanmax(np.abs(err_b[held]), initial=np.nan)),
             "max_error_held_out_after_deg": float(np.nanmax(np.abs(err_a[held]), initial=np.nan)),
             "fit_status": cal.status,
