@@ -94,6 +94,10 @@ def test_missing_table_is_named(cfg):
         ),
         (lambda c: c["sweep"]["3d"].update(p_max_kpa=400.0), ["sweep.3d.p_max_kpa = 400", "p_limit_kpa = 300"]),
         (lambda c: c["stability"]["rays"].update(p_max_kpa=350.0), ["stability.rays.p_max_kpa = 350", "300"]),
+        (
+            lambda c: c["cascade"]["calibration"]["fit_pressures_2d_kpa"].append([400, 0, 0, 0, 0, 0, 0, 0]),
+            ["cascade.calibration.fit_pressures_2d_kpa[7] = 400", "300"],
+        ),
         # more pressure than the plans' surrogate was sampled on
         (lambda c: c["sweep"]["3d"].update(p_max_kpa=200.0), ["cascade.p_max_kpa = 300", "sweep.3d.p_max_kpa = 200"]),
         # a middle-finger code on the index finger
@@ -106,7 +110,7 @@ def test_missing_table_is_named(cfg):
         ),
         (lambda c: c["patients"].update(p1={"measurements_mm": {"L3PP": 5.06}}), ["length -12", "coded_bound"]),
         # the Mooney-Rivlin law unstable at rest, or within the stretches an FE model meets
-        # (with Table 5's c01 and c20; the config's present c01 = 0.2975 keeps mu0 > 0 and the law stable)
+        # (with Table 5's c01 and c20, as in the config)
         (
             lambda c: c["actuator"]["material"].update(c10_mpa=-0.26, c01_mpa=0.09754981, c20_mpa=0.05750069),
             ["c10_mpa = -0.26", "mu0", "<= 0"],

@@ -154,6 +154,10 @@ def _check_pressure_bounds(config: Mapping[str, Any]) -> None:
     pressures += [
         (f"fidelity.p_top_kpa[{i}]", p) for i, p in enumerate(config.get("fidelity", {}).get("p_top_kpa", []))
     ]
+    pressures += [
+        (f"cascade.calibration.fit_pressures_2d_kpa[{i}]", max(p))
+        for i, p in enumerate(cascade.get("calibration", {}).get("fit_pressures_2d_kpa", []))
+    ]
     for key, p in pressures:
         if p is not None and not float(p) <= limit:
             raise ConfigError(
