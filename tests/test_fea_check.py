@@ -79,6 +79,27 @@ def test_strap_spring_is_rigid_body_invariant():
     assert strap.force(x) == pytest.approx(6.0)
 
 
+def test_support_plane_pushes_up_what_sinks_below_it_and_its_tangent_is_its_derivative():
+    from workflow.fem.finger2d import SupportPlane
+
+    # three nodes over the plane y = 1: one above the band, one inside it, one 0.05 mm through
+    x = np.array([[0.0, 1.0, 2.0], [1.5, 1.005, 0.95]])
+    plane = SupportPlane(6, [0, 1, 2], np.array([0.5, 1.0, 0.5]), y0=1.0, eps=100.0, smoothing=0.01)
+    f, K = plane.evaluate(x, None, 1.0)
+    assert f[1] == 0.0 and f[3] < 0 and f[5] < 0 and np.all(f[0::2] == 0)  # only y, only where in or near the plane
+    # in penetration: eps A (g - d/2), the reaction of a plane whose penalty is eps
+    assert f[5] == pytest.approx(100.0 * 0.5 * (-0.05 - 0.005))
+    assert plane.force(x) == pytest.approx(-(f[3] + f[5]))
+    # tangent = central difference of the force, node by node (C1 law: also inside the band)
+    h = 1e-7
+    for node in range(3):
+        xp, xm = x.copy(), x.copy()
+        xp[1, node] += h
+        xm[1, node] -= h
+        fd = (plane.evaluate(xp, None, 1.0, False)[0] - plane.evaluate(xm, None, 1.0, False)[0]) / (2 * h)
+        np.testing.assert_allclose(K.toarray()[:, 2 * node + 1], fd, atol=1e-5)
+
+
 def _finger_only(h=3.0, stiff=(0.15, 0.06, 0.02)):
     """FE finger (flesh, bone, hinges, gravity), MCP pinned; stiff linear springs keep the droop small."""
     springs = [F.JointSpring.linear(k / 90.0) for k in stiff]

@@ -55,6 +55,7 @@ DEFAULT_FEA_CHECK: dict[str, Any] = {
     "bone": {"e_mpa": 20000.0, "nu": 0.3},
     "finger_penalty_factor": 100.0,
     "slide_stiffness_n_per_mm": 1.0e-6,
+    "hand_support": False,
     "tip_min_depth_ratio": 0.35,
     "penetration_bound_mm": 0.1,
     # the retry that passes the blocks' first corner contact (measured on the mean finger's gravity phase)
@@ -209,6 +210,7 @@ def build_patient_fea(
         gravity=gravity if g > 0 else None,
         contact=contact,
         slide_k=float(fc["slide_stiffness_n_per_mm"]),
+        hand_support=bool(fc["hand_support"]),
         formulation=actuator_cfg.get("formulation", fem.DEFAULT_FORMULATION),
     )
     notes = (

@@ -44,7 +44,7 @@ import numpy as np
 import skfem
 
 from workflow.fem._assembly import SolidAssembler
-from workflow.fem._contact import ContactPair, contact_pairs_from_mesh
+from workflow.fem._contact import ContactPair, _tributary, contact_pairs_from_mesh
 from workflow.fem._mesh import UnitMesh
 from workflow.fem._overlap import overlap_measures
 from workflow.fem._solve import DEFAULT_SOLVER, Model, solve_path
@@ -59,6 +59,7 @@ from workflow.fem.finger2d import (
     HingeSpring,
     RigidRotationUpdate,
     StrapSpring,
+    SupportPlane,
 )
 
 from ..common.constants import JOINTS
@@ -167,6 +168,7 @@ class CoupledSetup:
     gravity: np.ndarray | None = None
     contact: dict = field(default_factory=dict)
     slide_k: float = 1e-6
+    hand_support: bool = False  # a rigid plane at the dorsal line under the actuator proximal of the MCP joint
     solid: SolidAssembler | None = None
     rigid_update: bool = True
     formulation: str = DEFAULT_FORMULATION  # of the actuator's silicone and paper; flesh and bone plain Q1
@@ -256,9 +258,19 @@ def coupled_model(
         straps[joint] = StrapSpring(n, p, _strap_anchor(cm, jn), chords, setup.strap_k)
     slide = DofSpring(n, [2 * clamp[0]], setup.slide_k)
     extras = [*hinges.values(), *straps.values(), slide]
+    eps = contact_penalty(setup.mat, c)
+    hand = None
+    if setup.hand_support:
+        # the back of the hand: the dorsal line proximal of the MCP joint, under the units that lie over it
+        mcp = p[:, cm.finger_node(fm.nodes["joint_MCP"])]
+        skin = np.unique(cm.um.facets["finger_dorsal"])
+        y0 = float(p[1, skin[np.argmin(p[0, skin])]])
+        nodes, area = _tributary(p, cm.um.facets["outer_bottom"])
+        over = p[0, nodes] < mcp[0] - 1e-9
+        hand = SupportPlane(n, nodes[over], area[over], y0, eps, c["smoothing_mm"])
+        extras.append(hand)
     if setup.gravity is not None:
         extras.append(DeadLoad(setup.gravity, ramp=gravity_ramp))
-    eps = contact_penalty(setup.mat, c)
     pairs = contact_pairs_from_mesh(cm.um, c["search_mm"], c["extend"], c["smoothing_mm"])
     skin, bottom = cm.um.facets["finger_dorsal"], cm.um.facets["outer_bottom"]
     fac = float(c["finger_penalty"]) / eps  # own penalty (see the module docstring)
@@ -276,7 +288,7 @@ def coupled_model(
         extras=extras,
         updaters=[segment_rotation_update(cm)] if setup.rigid_update else [],
     )
-    return model, {"hinges": hinges, "straps": straps, "slide": slide, "finger_pairs": finger_pairs}
+    return model, {"hinges": hinges, "straps": straps, "slide": slide, "finger_pairs": finger_pairs, "hand": hand}
 
 
 @dataclass

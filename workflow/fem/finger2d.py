@@ -378,6 +378,45 @@ class DofSpring:
         return f, sp.csr_matrix((np.full(self.dofs.size, self.k), (self.dofs, self.dofs)), shape=(self.n, self.n))
 
 
+class SupportPlane:
+    """A rigid, frictionless plane ``y >= y0`` under some nodes (the back of the hand under the actuator's CMC units).
+
+    Node-to-plane penalty with the self-contact's C1 law (see :mod:`workflow.fem._contact`): per node, the
+    energy eps A / 2 <g>^2 in penetration, g = y - y0, smoothed over a band ``smoothing`` above the plane;
+    ``eps`` MPa/mm, ``area`` (nodes,) the nodes' tributary lengths (mm, per mm of width in 2D).
+    """
+
+    def __init__(self, ndofs: int, nodes: Sequence[int], area: np.ndarray, y0: float, eps: float, smoothing: float):
+        self.n = ndofs
+        self.nodes = np.asarray(nodes, dtype=np.int64)
+        self.dofs = 2 * self.nodes + 1
+        self.k = float(eps) * np.asarray(area, float)
+        self.y0, self.d = float(y0), float(smoothing)
+
+    def _law(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        g = x[1, self.nodes] - self.y0
+        d = self.d
+        if d > 0:
+            t = np.where(g <= 0.0, g - 0.5 * d, -(np.clip(d - g, 0.0, None) ** 2) / (2.0 * d))
+            dt = np.where(g <= 0.0, 1.0, np.clip(d - g, 0.0, None) / d)
+        else:
+            t, dt = np.minimum(g, 0.0), (g < 0.0).astype(float)
+        return t, dt
+
+    def force(self, x: np.ndarray) -> float:
+        """Total support reaction (N, per mm of width in 2D), upward."""
+        t, _ = self._law(x)
+        return float(-np.sum(self.k * t))
+
+    def evaluate(self, x, u, lam, tangent=True):
+        t, dt = self._law(x)
+        f = np.zeros(self.n)
+        f[self.dofs] = self.k * t  # in the residual: minus the upward reaction
+        if not tangent:
+            return f, None
+        return f, sp.csr_matrix((self.k * dt, (self.dofs, self.dofs)), shape=(self.n, self.n))
+
+
 class RigidRotationUpdate:
     """Newton update of nearly rigid bodies by their finite rotation (a ``Model`` updater, 2D).
 
