@@ -92,6 +92,30 @@ def test_inverse_backs_off_from_a_failed_forward_solve_and_records_it():
     assert first == pytest.approx(40.0) and second == pytest.approx(20.0)
 
 
+def test_a_failed_step_inside_the_step_box_is_halved_not_repeated():
+    # the first step (about 33 kPa) lies well inside the 100 kPa box: halving the box would give the same step and
+    # the same stalled solve again (seen on the FEA: two identical corrections); the step itself is halved
+    forward, calls = _double(fail_calls={1})
+    p0 = np.zeros(8)
+    y0, ok0 = forward(p0)
+    res = bounded_broyden(
+        forward,
+        p0,
+        y0,
+        ok0,
+        [20.0, 0.0, 0.0],
+        _chain_jacobian(),
+        lo=0.0,
+        hi=P_MAX,
+        tol=2.0,
+        budget=8,
+        max_step_kpa=100.0,
+    )
+    first, second = (np.max(np.abs(res.pressures_kpa[k] - p0)) for k in (1, 2))
+    assert first < 50.0 and second == pytest.approx(first / 2)
+    assert res.reached, res.reason
+
+
 def test_inverse_stops_at_its_budget():
     forward, calls = _double()
     p0 = np.zeros(8)

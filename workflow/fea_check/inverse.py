@@ -10,7 +10,7 @@ angles y(p) (deg) and may fail (a stalled FE solve).  Each iteration solves, wit
 ``w = regularisation * |J E|_F^2 / n``, keeps the planner's objective in the directions the three angles leave
 free (``z_ref = 0``: least pressure; the plan's own pressures: stay near the plan).  J starts as the reduced-order
 chain's Jacobian and is corrected by Broyden's update from each forward solve,
-J += (dy - J dp) dp^T / dp^T dp.  A failed forward solve halves the step from the best iterate so far.
+J += (dy - J dp) dp^T / dp^T dp.  A failed forward solve halves that step, from the best iterate so far.
 
 It stops when every angle is within the tolerance (reached), when the budget of forward solves is spent, or when the
 bounds block progress: the bounded step changes no pressure by ``min_step_kpa`` while the target is missed; the
@@ -109,7 +109,7 @@ def bounded_broyden(
         res.reason = "the start's forward solve did not converge: no step attempted"
         return res
     best_z, best_y, best_score = z, np.asarray(y0, float), _score(target - y0)
-    step_scale = 1.0
+    room = float(max_step_kpa)  # largest change of any pressure in the next step (kPa)
     while True:
         err = target - best_y
         if best_score <= tol:
@@ -121,11 +121,10 @@ def bounded_broyden(
         w = regularisation * float(np.sum(J * J)) / m
         A = np.vstack([J, np.sqrt(w) * np.eye(m)])
         b = np.concatenate([err, -np.sqrt(w) * (best_z - z_ref)])
-        room = step_scale * max_step_kpa
         lb = np.maximum(lo_z - best_z, -room)
         ub = np.minimum(hi_z - best_z, room)
         dz = lsq_linear(A, b, bounds=(lb, ub + 1e-12)).x
-        if np.max(np.abs(dz)) < min_step_kpa and step_scale < 1.0:
+        if np.max(np.abs(dz)) < min_step_kpa and room < max_step_kpa:
             res.reason = (
                 f"the step shrank below {min_step_kpa:g} kPa after {res.solves} forward solve(s) that stalled or "
                 "did not improve"
@@ -147,7 +146,8 @@ def bounded_broyden(
         res.angles_deg.append(y_new if ok else np.full(3, np.nan))
         res.ok.append(bool(ok))
         if not ok or not np.all(np.isfinite(y_new)):
-            step_scale *= 0.5
+            # half the step that failed (not of the box: a step inside the box would come back unchanged)
+            room = 0.5 * float(np.max(np.abs(dz)))
             continue
         dy = y_new - best_y
         J = J + np.outer(dy - J @ dz, dz) / float(dz @ dz)
@@ -155,7 +155,7 @@ def bounded_broyden(
         if score < best_score:
             best_z, best_y, best_score = z_new, y_new, score
             res.best = len(res.pressures_kpa) - 1
-            step_scale = min(1.0, 2 * step_scale)
+            room = min(float(max_step_kpa), 2 * room)
         else:
-            step_scale *= 0.5
+            room = 0.5 * float(np.max(np.abs(dz)))
     return res
