@@ -378,6 +378,46 @@ def test_correction_step_replans_with_the_fea_angles_until_the_target_is_reached
     assert np.all(cor.pressures_kpa[cor.best] >= cor.pressures_kpa[0] - 1e-9)  # weaker units need more pressure
 
 
+def test_correction_step_keeps_the_planners_objective_in_the_free_directions(monkeypatch):
+    # a co-pressurised plan (the paper's rule) corrected on an "FEA" with weaker units: with the paper's planner the
+    # correction stays near the plan's pressures where the angles leave them free (the straight DIP group stays at
+    # about 300/300 kPa); with least pressure as the objective it lets them fall
+    from test_cascade import LIMITS, LinearUnit, model
+
+    from workflow.cascade import model as C
+
+    ro, truth = model(LinearUnit()), model(LinearUnit(c=0.02))
+    check = _fake_fea(monkeypatch, truth)
+    target = np.array([45.0, 30.0, 0.0])
+    opts = {"tol_deg": 5.0, "p_max_kpa": 300.0, "tie_cmc_mcp": True, "margin_deg": 0.25, "active_limits_nm": LIMITS}
+    plan = planning.plan_exercise(ro, target, planner="paper", **opts)
+    p = C.pressures_table(plan.pressures_kpa)
+    first = check(None, "X", p, {})
+    kept = {}
+    for objective in ("paper", "least_pressure"):
+        cor = correction.correct_exercise(
+            None,
+            ro,
+            "X",
+            target,
+            p,
+            plan.equilibrium.joint_angles_deg,
+            first,
+            to_2d=lambda q: q,
+            solver={},
+            gravity=None,
+            tolerance_deg=5.0,
+            limits_nm=np.array(LIMITS),
+            plan_opts={**opts, "planner": objective},
+            max_iterations=4,
+        )
+        assert cor.stop_reason.startswith("reached"), cor.stop_reason
+        kept[objective] = cor.pressures_kpa[cor.best]
+    assert np.min(p[3]) > 250  # the plan holds the straight DIP group co-pressurised
+    assert np.max(np.abs(kept["paper"][3] - p[3])) < 25.0
+    assert np.max(kept["least_pressure"][3]) < np.min(p[3]) - 50.0
+
+
 def test_correction_step_stops_when_the_pressures_are_at_their_limit(monkeypatch):
     from test_cascade import LIMITS, LinearUnit, model
 

@@ -2,8 +2,9 @@
 target, a bounded quasi-Newton inverse on the FEA itself (:mod:`.inverse`):
 the reduced-order chain's Jacobian at the plan as the first estimate, Broyden's
 update from every FEA solve, the pressures within zero and the plan's limit,
-P_CMC tied to P_MCP where the plan ties them, least pressure in the directions
-the three angles leave free.  It stops at the tolerance, at the budget of FEA
+P_CMC tied to P_MCP where the plan ties them, and in the directions the three
+angles leave free the planner's objective (least pressure; the planners that
+co-pressurise on purpose stay near the plan).  It stops at the tolerance, at the budget of FEA
 solves, or where the bounds block progress (naming the chambers).  An exercise
 counts as reached only when the FEA reaches it.
 
@@ -86,7 +87,8 @@ def correct_exercise(
     its pressures (kPa) and ``predicted_deg`` its angles there; ``first`` the
     FEA check of the plan; ``to_2d``: (4, 2) planned -> (4, 2) applied 2D
     pressures; ``plan_opts``: keywords of :func:`workflow.cascade.plan_exercise` (its ``p_max_kpa`` and
-    ``tie_cmc_mcp`` bound and tie the pressures); ``max_iterations``: FEA solves at most; ``min_change_kpa``: a
+    ``tie_cmc_mcp`` bound and tie the pressures, its ``planner`` sets the objective in the directions the angles
+    leave free); ``max_iterations``: FEA solves at most; ``min_change_kpa``: a
     step that changes no pressure by this much means the bounds block progress.
     """
 
@@ -131,6 +133,11 @@ def correct_exercise(
         return chk.angle_deg, ok
 
     tie = tie_matrix(8, [(0, 2), (1, 3)]) if plan_opts.get("tie_cmc_mcp", True) else None
+    # in the directions the three angles leave free, the planner's own objective: least pressure, or (the planners
+    # that co-pressurise on purpose) stay near the plan's pressures
+    z_ref = None
+    if plan_opts.get("planner", "least_pressure") != "least_pressure":
+        z_ref = np.linalg.lstsq(np.eye(8) if tie is None else tie, np.asarray(p8, float), rcond=None)[0]
     inv = bounded_broyden(
         forward,
         p8,
@@ -143,6 +150,7 @@ def correct_exercise(
         tol=float(tolerance_deg),
         budget=int(max_iterations),
         E=tie,
+        z_ref=z_ref,
         min_step_kpa=float(min_change_kpa),
     )
 
