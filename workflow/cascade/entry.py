@@ -96,7 +96,7 @@ def write_cascade_plan(
     limit = plan_limit(c, unit, material_limit)
     log.info("patient %s: every planned pressure <= %s", patient_name, limit)
     t0 = time.perf_counter()
-    chosen = str(c.get("planner", "least_pressure"))
+    chosen = str(c.get("planner", "paper"))
     by_planner = {}
     for planner in PLANNERS:
         if planner != chosen and planner == "stiffness" and not hasattr(unit, "stiffness_nm_per_deg"):

@@ -119,7 +119,7 @@ def plan_options(
         "p_max_kpa": p_max,
         "tie_cmc_mcp": bool(c["tie_cmc_mcp"]),
         "margin_deg": float(c["margin_deg"]),
-        "planner": str(c.get("planner", "least_pressure")),
+        "planner": str(c.get("planner", "paper")),
         "stiffness_margin": float(c.get("stiffness_margin", 1.0)),
         "active_limits_nm": None if active_limits_nm is None else np.abs(np.asarray(active_limits_nm, float)),
     }
