@@ -196,7 +196,10 @@ def test_pressure_mapping_flags():
         return 0.025 * (np.asarray(pt) - np.asarray(pb))
 
     p2, flag = pressures_2d(p3, a3, a2, p_max_2d_kpa=400.0)
-    assert flag[0, 1] == 1 and np.allclose(p2[0, 1], [100, 100])  # equal pressures kept
+    # equal pressures: the scale of the pair beside the diagonal (2 here), so the map is continuous across it
+    assert flag[0, 1] == 1 and np.allclose(p2[0, 1], [200, 200])
+    near, _ = pressures_2d(np.array([[[100.0, 99.0]]]), a3, a2, p_max_2d_kpa=400.0)
+    assert np.allclose(near[0, 0], [200, 198])
     assert flag[1, 1] == 2 and p2[1, 1, 0] == pytest.approx(400.0)  # 580 kPa needed: capped at the grid edge
     assert flag[0, 0] == 2  # 600 kPa needed
 

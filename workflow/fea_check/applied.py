@@ -13,7 +13,10 @@ import numpy as np
 from workflow.actuator.mapping import map_pairs
 from workflow.actuator.pressure_limit import PressureLimit, clip_pressures, material_limit, smallest
 
-__all__ = ["applied_limit", "pressures_2d"]
+__all__ = ["DIAGONAL_OFFSET", "applied_limit", "pressures_2d"]
+
+#: relative offset of the bottom pressure at which a pair with P_T = P_B takes its scale (see `pressures_2d`)
+DIAGONAL_OFFSET = 0.05
 
 
 def applied_limit(actuator_cfg: Mapping | None, p_max_2d_kpa: float = np.inf) -> PressureLimit:
@@ -37,7 +40,8 @@ def pressures_2d(
     """2D pressures (..., 2) for 3D pairs ``p3`` (..., 2: top, bottom) in kPa, and the mapping flag per pair.
 
     Without surrogates (``angle_3d`` is None) the pressures are returned
-    unchanged (flag 3).  Every pressure returned is at most ``p_max_2d_kpa``
+    unchanged (flag 3).  A pair with P_T = P_B (flag 1) takes the scale of the pair
+    (P_T, (1 - ``DIAGONAL_OFFSET``) P_B), where the free-angle map is defined, if that pair maps.  Every pressure returned is at most ``p_max_2d_kpa``
     and ``limit`` (:func:`applied_limit`); a pair cut back to that is flag 4.
     With ``m_ext_nm`` (N m per unit, shape ``p3.shape[:-1]``) the angles are
     matched under that end moment, and ``angle_3d``/``angle_2d`` take
@@ -63,6 +67,23 @@ def pressures_2d(
         eq = r["status"] == 1
         p2[eq] = p3[eq]
         flag[eq] = 1
+        if np.any(eq):
+            # on the diagonal the free angles are 0 in both models and the map is 0/0: such a pair takes the scale
+            # of the pair of the same top pressure just off the diagonal, so the map stays continuous across it
+            # (kept unscaled, 299/300 kPa became about 114/115 kPa in 2D while 300/300 stayed 300/300)
+            near = map_pairs(
+                p3[..., 0][eq],
+                (1.0 - DIAGONAL_OFFSET) * p3[..., 1][eq],
+                angle_3d,
+                angle_2d,
+                p_max_2d_kpa=p_edge,
+                p_max_3d_kpa=p_max_3d_kpa,
+                m_ext_nm=None if m_ext_nm is None else np.asarray(m_ext_nm, float)[eq],
+            )
+            ok = near["status"] == 0
+            scaled = p3[eq]
+            scaled[ok] = scaled[ok] * near["scale"][ok][:, None]
+            p2[eq] = scaled
         out = r["status"] == 2
         pmax = np.maximum(p3[..., 0], p3[..., 1])
         with np.errstate(invalid="ignore", divide="ignore"):
