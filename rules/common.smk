@@ -241,13 +241,21 @@ def get_calibration_patient():
     return c["calibration"].get("patient") or c["validation_patient"]
 
 
+def calibration_cascade_cfg():
+    """The cascade section as the chain's calibration reads it: without the planner and without whether the plans
+    use the calibration, so that switching either does not rerun its FEA."""
+    c = {k: v for k, v in config["cascade"].items() if k not in ("planner", "stiffness_margin")}
+    c["calibration"] = {k: v for k, v in c["calibration"].items() if k != "use"}
+    return c
+
+
 def get_calibration_slice(wildcards):
     """Param function: the config the chain's calibration depends on (not the plans': it runs upstream of them)."""
     name = get_calibration_patient()
     return {
         "patient": {name: config["patients"][name]},
         "anthropometry": config["anthropometry"],
-        "cascade": {k: v for k, v in config["cascade"].items() if k not in ("planner", "stiffness_margin")},
+        "cascade": calibration_cascade_cfg(),
         "unit_model": config["surrogates"]["unit_model"],
         "actuator": config["actuator"],
         "fea_check": config["fea_check"],

@@ -100,7 +100,7 @@ rule chain_calibration:
         unpack(get_fea_surrogates),
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",
-        joint_loads=lambda wc: f"results/patients/{get_calibration_patient()}/joint_loads.nc",
+        joint_loads=f"results/patients/{get_calibration_patient()}/joint_loads.nc",
         table08="resources/table08_planned_pressures_3d.csv",
         code=code_files("scripts.chain_calibration"),
     output:
@@ -119,10 +119,10 @@ rule chain_calibration:
     params:
         patient_name=get_calibration_patient(),
         patient=config["patients"][get_calibration_patient()],
-        calibration=config["cascade"]["calibration"],
+        calibration=calibration_cascade_cfg()["calibration"],
         fea_check=config["fea_check"],
         actuator=config["actuator"],
-        cascade=config["cascade"],
+        cascade=calibration_cascade_cfg(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         config_slice=get_calibration_slice,

@@ -176,34 +176,65 @@ def test_stiffness_planner_co_pressurises_to_hold_the_pose_stiffer():
 
 
 def test_paper_rule_gives_each_unit_its_angle_under_its_moment_and_co_pressurises_straight_groups():
-    # the paper's rule on the straight pose (TGE1): each span's units start on the 300 kPa top-pressure curve where
-    # their free angle is the unit's target (0 where no strap takes up rotation: P = (300, 300)), and the top
-    # pressure alone then moves until each unit gives that angle under the span's moment, the bottom held
+    # the paper's rule on the straight pose (TGE1): each span's units start on the 300 kPa curve where their free
+    # angle is the unit's target (the straps' give under the span's extension moment asks a little extension:
+    # mirrored, the bottom at 300 kPa), and the top pressure alone then moves until each unit gives that angle under
+    # the span's moment, the bottom held
     m = model()
     unit = LinearUnit()
     plan = planning.plan_exercise(m, [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS, planner="paper")
     p = plan.pressures_kpa.reshape(4, 2)
-    assert np.all(p[:, 0] > 0) and np.all(p[:, 0] < 300) and np.all(p[:, 1] > 250)  # co-pressurised
+    np.testing.assert_allclose(p[:, 1], 300.0)  # the bottom held at the limit
+    assert np.all(p[:, 0] > 0) and np.all(p[:, 0] < 300)  # co-pressurised, the top below: an extension moment
     m_req = plan.required_moments_nm
-    comp = np.rad2deg(C._strap_compliance(m) * m_req)
-    a, k0, k1 = unit.c, unit.k0, unit.k1
+    give = np.rad2deg(C._strap_compliance(m) * m_req)
+    a, k0, k1, b = unit.c, unit.k0, unit.k1, 300.0
     for j, g in ((0, 1), (1, 2), (2, 3)):  # MCP span (CMC tied to MCP), PIP, DIP
-        theta_u = -comp[j] / m.span_counts()[j].sum()
-        assert theta_u >= 0  # the straps give a little extension under an extension moment
-        b = 300.0 - theta_u / a  # (a): the double's free angle a (300 - b) = theta_u
-        assert p[g, 1] == pytest.approx(b, abs=0.02)
+        theta_u = give[j] / m.span_counts()[j].sum()
+        assert theta_u <= 0
         # (b), the double in closed form: a (t - b) - m / (k0 + k1 (t + b)) = theta_u, a quadratic in t
         roots = np.roots(
             [a * k1, a * k0 - theta_u * k1, -a * b * k0 - a * k1 * b**2 - m_req[j] - theta_u * (k0 + k1 * b)]
         )
         t_exact = roots[(roots.real > 0) & (roots.real < 300)].real
         assert p[g, 0] == pytest.approx(float(t_exact[0]), abs=0.02)
-    assert p[0, 1] == pytest.approx(300.0)  # the MCP span has no strap: free angle 0 on the diagonal
     assert plan.achieved, plan.reason
     np.testing.assert_allclose(plan.equilibrium.joint_angles_deg, 0.0, atol=0.5)
     # the least-pressure plan of the same pose pressurises one chamber of a group at most
     least = planning.plan_exercise(m, [0, 0, 0], tol_deg=5.0, active_limits_nm=LIMITS)
     assert np.all(np.minimum(least.pressures_kpa[0::2], least.pressures_kpa[1::2]) == 0)
+
+
+class BiasedUnit(LinearUnit):
+    """The double with a free angle 0.05 deg off on the diagonal, as a fitted surrogate may be."""
+
+    def free_angle_deg(self, pt, pb):
+        return super().free_angle_deg(pt, pb) + 0.05
+
+
+def test_paper_rule_takes_the_closest_pressures_where_no_pressure_meets_the_target():
+    # a straight span with no moment on a unit whose free angle is never 0 at the limit's top pressure: (a) takes
+    # the closest (300/300 kPa), not the top alone (which would flex the span by 35 deg), and (b) then lowers the
+    # top to where the unit is straight: 300 - 0.05 / c
+    m = model(unit=BiasedUnit())
+    sol, err = planning._span_plan_paper(m, 2, 0.0, 0.0, 300.0, True)
+    assert sol[7] == pytest.approx(300.0) and sol[6] == pytest.approx(300.0 - 0.05 / 0.029, abs=0.01)
+    assert abs(err) < 1e-6
+    # a span asked for more than the top alone gives under its moment: the closest of both lines, not (a) kept
+    sol, err = planning._span_plan_paper(model(), 1, 0.3, 20.0 * 4, 300.0, True)
+    assert sol[4] == pytest.approx(300.0) and sol[5] == pytest.approx(0.0) and err < 0
+
+
+def test_paper_rule_on_a_calibrated_chain_bends_each_span_exactly():
+    # the rule divides the span's target by the span's gain and adds its give: every span exactly on target
+    from workflow.cascade import calibration as CAL
+
+    m = CAL.calibrated(model(), [0.6, 0.8, 0.9], [1.0, -0.5, 0.3])
+    target = np.array([30.0, 20.0, 0.0])
+    m_req, *_ = C._required_moments(m, target)
+    for j in range(3):
+        sol, err = planning._span_plan_paper(m, j, m_req[j], target[j], 300.0, True)
+        assert abs(err) < 1e-3, (j, sol, err)
 
 
 def test_paper_rule_bends_every_span_exactly_under_its_moment_within_the_limit():
@@ -218,10 +249,10 @@ def test_paper_rule_bends_every_span_exactly_under_its_moment_within_the_limit()
     assert np.all(p <= 280.0) and np.all(p > 0)  # every group co-pressurised, none above the limit
     assert np.any(p == 280.0)
     m_req = plan.required_moments_nm
-    comp = np.rad2deg(C._strap_compliance(m) * m_req)
+    give = np.rad2deg(C._strap_compliance(m) * m_req)
     counts = m.span_counts()
     for j in range(3):
-        bend = comp[j] + sum(counts[j][g] * unit.angle_deg(p[g, 0], p[g, 1], m_req[j]) for g in range(4))
+        bend = sum(counts[j][g] * unit.angle_deg(p[g, 0], p[g, 1], m_req[j]) for g in range(4)) - give[j]
         assert bend == pytest.approx(target[j], abs=0.01)
     assert plan.achieved, plan.reason
     assert np.max(np.abs(plan.equilibrium.joint_angles_deg - target)) <= 5.0

@@ -98,6 +98,8 @@ def test_missing_table_is_named(cfg):
             lambda c: c["cascade"]["calibration"]["fit_pressures_2d_kpa"].append([400, 0, 0, 0, 0, 0, 0, 0]),
             ["cascade.calibration.fit_pressures_2d_kpa[7] = 400", "300"],
         ),
+        (lambda c: c["cascade"]["calibration"].update(patient="meen"), ["cascade.calibration.patient = 'meen'"]),
+        (lambda c: c["cascade"]["calibration"].update(gain_bounds=[1.5, 0.1]), ["gain_bounds = [1.5, 0.1]"]),
         # more pressure than the plans' surrogate was sampled on
         (lambda c: c["sweep"]["3d"].update(p_max_kpa=200.0), ["cascade.p_max_kpa = 300", "sweep.3d.p_max_kpa = 200"]),
         # a middle-finger code on the index finger

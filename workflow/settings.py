@@ -70,6 +70,16 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
         name = cascade.get(key)
         if name and name not in config["patients"]:
             raise ConfigError(f"cascade.{key} = {name!r}: no such patient (patients: {sorted(config['patients'])})")
+    cal = cascade.get("calibration", {})
+    name = cal.get("patient")
+    if name and name not in config["patients"]:
+        raise ConfigError(
+            f"cascade.calibration.patient = {name!r}: no such patient (patients: {sorted(config['patients'])})"
+        )
+    for key in ("gain_bounds", "compliance_bounds_rad_per_nm"):
+        lo_hi = cal.get(key)
+        if lo_hi is not None and not float(lo_hi[0]) < float(lo_hi[1]):
+            raise ConfigError(f"cascade.calibration.{key} = {list(lo_hi)}: the lower bound must be below the upper")
     dummy = cascade.get("dummy_patient")
     if dummy and config["patients"][dummy].get("model", "human") != "dummy":
         raise ConfigError(f"cascade.dummy_patient = {dummy!r}: that patient needs `model: dummy`")

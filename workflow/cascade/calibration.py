@@ -1,12 +1,12 @@
 """The reduced-order chain calibrated to the finger-actuator FEA.
 
-The chain (:mod:`workflow.cascade.model`) turns each joint by its span's units' bend plus the straps' give.  In the
+The chain (:mod:`workflow.cascade.model`) turns each joint by its span's units' bend less the straps' give.  In the
 2D finger-actuator FEA (paper section 3.2) the thick actuator is held to the finger only by contact and two straps,
 so part of its bend lifts it off the finger instead of turning the joint, and the flesh under it gives.  Two free
 parameters per joint's span stand for that: a gain ``g_X`` (the share of the units' bend that turns the joint) and
-a compliance ``c_X`` (rad per N m of span moment, beyond the straps'), so that
+a compliance ``c_X`` (rad per N m of span moment, beyond the straps'; positive: the joint lags the units), so that
 
-    theta_X = g_X * sum_units theta_unit(P, m_X) + (c_strap,X + c_X) m_X.
+    theta_X = g_X * sum_units theta_unit(P, m_X) - (c_strap,X + c_X) m_X.
 
 They are fitted by least squares (``scipy.optimize.least_squares``, bounded) to the joint angles of FEA solves at a
 list of pressure sets fixed in advance (each ramp's states at a few load factors), with the same unit model the FEA

@@ -73,12 +73,21 @@ def write_cascade_plan(
     chain_note = "the paper's chain (no calibration)"
     if calibration_nc is not None:
         cal = open_result(calibration_nc)
+        if int(cal.attrs["fit_status"]) <= 0:  # least_squares: 0 = evaluations spent, -1 = bad input
+            raise RuntimeError(f"{calibration_nc}: the chain's fit did not converge ({cal.attrs['fit_message']})")
+        if str(cal.attrs["patient"]) != patient_name:
+            log.warning(
+                "patient %s: the chain calibrated on patient %s's finger is applied to this one (the gains describe "
+                "the actuator's coupling to a finger, fitted on one)",
+                patient_name,
+                cal.attrs["patient"],
+            )
         model = calibrated(model, cal["span_gain"].values, cal["span_compliance_rad_per_nm"].values)
         chain_note = (
-            f"calibrated to the 2D FEA of patient {cal.attrs.get('patient', '?')}: gains "
+            f"calibrated to the 2D FEA of patient {cal.attrs['patient']}: gains "
             f"{np.round(model.span_gain, 3).tolist()}, compliances {np.round(model.span_compliance_rad_per_nm, 3).tolist()} "
-            f"rad/N m; held-out error {cal.attrs.get('max_error_held_out_before_deg', np.nan):.1f} -> "
-            f"{cal.attrs.get('max_error_held_out_after_deg', np.nan):.1f} deg"
+            f"rad/N m; held-out error {cal.attrs['max_error_held_out_before_deg']:.1f} -> "
+            f"{cal.attrs['max_error_held_out_after_deg']:.1f} deg"
         )
     log.info("patient %s: chain: %s", patient_name, chain_note)
     limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values

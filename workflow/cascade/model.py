@@ -26,7 +26,7 @@ static equilibrium that can be solved for any pressures:
   strap force ``m_X / a_X`` and give ``m_X / (k a_X^2)`` of extra span rotation.
   The MCP span is held by the sliding support at the hand end (no give).
 * **Calibration** (optional, :mod:`workflow.cascade.calibration`): a joint turns by ``g_X`` times its span's
-  units' bend plus ``c_X m_X`` beyond the straps' give; ``g = 1``, ``c = 0`` is the paper's chain.
+  units' bend less ``c_X m_X`` beyond the straps' give; ``g = 1``, ``c = 0`` is the paper's chain.
 * **Equilibrium** of the finger+actuator section at each joint:
   ``spring_X(theta_X) = G_X(theta) + m_X``, where ``G_X`` is the flexion
   moment of gravity about X of the phalanges and of the actuator units distal
@@ -267,7 +267,7 @@ def actuator_gravity_moments_nm(model: CascadeModel, angles_deg: Sequence[float]
 
 
 def _strap_compliance(model: CascadeModel) -> np.ndarray:
-    """Extra span rotation per unit moment (rad per N m) from the straps' give."""
+    """The straps' give per unit span moment (rad per N m): 1 / (k a^2), 0 where no strap holds the span."""
     a = model.strap_arm_m
     with np.errstate(invalid="ignore"):
         c = 1.0 / (model.strap_stiffness_n_per_m * a * a)
@@ -275,7 +275,8 @@ def _strap_compliance(model: CascadeModel) -> np.ndarray:
 
 
 def _span_compliance(model: CascadeModel) -> np.ndarray:
-    """Span rotation per unit moment beyond the units' bend (rad per N m): the straps' give and the calibrated rest."""
+    """Give of each span per unit span moment (rad per N m): the straps' and the calibrated rest; the joint turns by
+    the units' bend (times the span's gain) less this times the moment."""
     return _strap_compliance(model) + np.asarray(model.span_compliance_rad_per_nm, float)
 
 
@@ -287,7 +288,8 @@ def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> t
     mm = np.tile(np.asarray(m_nm, float), 4)
     th = np.asarray(model.unit.angle_deg(pg[:, 0], pg[:, 1], mm), float).reshape(4, 3)  # (group, joint)
     counts = model.span_counts()  # (joint, group)
-    span = np.asarray(model.span_gain, float) * np.sum(counts * th.T, axis=1) + np.rad2deg(
+    # the joint lags the units by the span's give: a strap stretched by the moment the actuator drives the finger with
+    span = np.asarray(model.span_gain, float) * np.sum(counts * th.T, axis=1) - np.rad2deg(
         _span_compliance(model) * m_nm
     )
     unit_g = np.array([th[g, [j for j, jn in enumerate(JOINTS) if GROUPS[g] in SPANS[jn]][0]] for g in range(4)])

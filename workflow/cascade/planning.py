@@ -11,7 +11,7 @@ limits (``|m_X| <= limit_X``), halving the span goal when the pose drifts out.
 
 Which of the pressures that bend a span within the goal a plan takes is the planner's choice (``planner``):
 
-* ``least_pressure``: the least sum of squares (the default);
+* ``least_pressure``: the least sum of squares;
 * ``stiffness``: the least sum of squares among those whose span holds the pose with a stiffness margin s: the span's
   rotational stiffness (its units in series, k_span = 1 / sum_g n_g / k_g(P), N m per degree of span bend, from the
   unit model) at least s times the load's, |d m*_X / d theta_X| (the joint spring less gravity, by central
@@ -21,7 +21,7 @@ Which of the pressures that bend a span within the goal a plan takes is the plan
   the same angle under the span's moment; the pressures start where the unit's *free* angle is that angle on the
   top-pressure curve of the limit (Fig. 11 read at 300 kPa), and the top pressure alone then moves until the unit
   gives that angle under the moment (the bottom held), see `_span_plan_paper`.  It co-pressurises every group that
-  is to stay (nearly) straight, as Tables 8 and 10 do.
+  is to stay (nearly) straight, as Tables 8 and 10 do.  The config's default (``cascade.planner``).
 
 Pressures kPa, angles deg, moments N m.
 """
@@ -85,7 +85,7 @@ def _span_setup(model, joint: int, m_req: float, target: float, tie: bool):
     if tie and joint == 0:
         idx = [2, 3]
     counts = model.span_counts()[joint]
-    comp = np.rad2deg(_span_compliance(model)[joint] * m_req)
+    give = np.rad2deg(_span_compliance(model)[joint] * m_req)
     gain = float(model.span_gain[joint])
 
     def full(P):
@@ -97,7 +97,7 @@ def _span_setup(model, joint: int, m_req: float, target: float, tie: bool):
 
     def bend(P):
         p8 = full(P)
-        out = np.full(P.shape[0], comp - target)
+        out = np.full(P.shape[0], -give - target)
         for g in range(4):
             if counts[g]:
                 th = model.unit.angle_deg(p8[:, 2 * g], p8[:, 2 * g + 1], np.full(P.shape[0], m_req))
@@ -161,8 +161,9 @@ def _span_plan(
     return dict(zip(idx, P)), e
 
 
-def _crossing(f: np.ndarray, x: np.ndarray, x0: float) -> float | None:
-    """The zero of samples ``f`` on the grid ``x`` nearest ``x0`` (linear between the samples), or None.
+def _nearest_zero(f: np.ndarray, x: np.ndarray, x0: float) -> tuple[float, bool]:
+    """The zero of samples ``f`` on the grid ``x`` nearest ``x0`` (linear between the samples) and True; where ``f``
+    has none, the sample of least ``|f|`` and False.
 
     Samples within round-off of zero count as zeros (the free angle on the diagonal P_T = P_B is 0 only to 1e-16).
     """
@@ -171,9 +172,9 @@ def _crossing(f: np.ndarray, x: np.ndarray, x0: float) -> float | None:
     i = np.flatnonzero(s[:-1] * s[1:] < 0)
     zeros += list(x[i] - f[i] * (x[i + 1] - x[i]) / (f[i + 1] - f[i]))
     if not zeros:
-        return None
+        return float(x[np.argmin(np.abs(f))]), False
     zeros = np.asarray(zeros, float)
-    return float(zeros[np.argmin(np.abs(zeros - x0))])
+    return float(zeros[np.argmin(np.abs(zeros - x0))]), True
 
 
 def _span_plan_paper(
@@ -181,41 +182,46 @@ def _span_plan_paper(
 ) -> tuple[dict[int, float], float]:
     """The paper's rule for one span (section 3.1, Figs. 11a-b, Tables 7 -> 8), applied to our unit targets.
 
-    Every unit of the span gets the same pressures and the same targets: the angle
-    theta_u = (span bend target - strap compliance) / units in the span, and the span moment ``m_req`` (N m per
-    unit, the Table 7 analogue).  (a) On the unit's top-pressure curve at the limit (Fig. 11 at 300 kPa), the
-    pressure ratio whose *free* angle is theta_u: P_T = p_max and P_B from theta_f(P_T, P_B) = theta_u (mirrored,
-    P_B = p_max, for theta_u < 0; P_B = 0 where even that bends too little).  (b) The moment the unit must deliver is
-    then added by moving the top pressure alone, the bottom held (the paper: along the top pressure's axis, the
-    stiffness kept): the P_T nearest (a) with theta(P_T, P_B, m_req) = theta_u.  Where no P_T in [0, p_max] does,
-    the bottom pressure moves instead, the top held; where neither, the pressures of (a) stand and the span misses
-    its target.  Returns {index into the eight pressures: kPa} and the span's bend error (deg).
+    Every unit of the span gets the same pressures and the same targets: the angle theta_u that makes the span's
+    bend the target under the span moment ``m_req`` (N m per unit, the Table 7 analogue), i.e. the target less the
+    span's give, over the span's gain times its units (1 and the straps' give in the paper's chain).  (a) On the
+    unit's top-pressure curve at the limit (Fig. 11 at 300 kPa), the pressure ratio whose *free* angle is theta_u:
+    P_T = p_max and P_B from theta_f(P_T, P_B) = theta_u (mirrored, P_B = p_max, for theta_u < 0); where no ratio
+    gives it, the one that comes closest (P_B = 0 where even the top alone bends too little).  (b) The moment the
+    unit must deliver is then added by moving the top pressure alone, the bottom held (the paper: along the top
+    pressure's axis, the stiffness kept): the P_T nearest (a) with theta(P_T, P_B, m_req) = theta_u.  Where no P_T in
+    [0, p_max] does, the bottom pressure moves instead, the top held; where neither, the pressures on those two lines
+    that come closest, and the span misses its target.  Returns {index into the eight pressures: kPa} and the span's
+    bend error (deg).
     """
-    idx, full, bend = _span_setup(model, joint, m_req, target, tie)
-    counts = model.span_counts()[joint]
-    n_units = int(sum(counts[GROUPS.index(g)] for g in SPANS[JOINTS[joint]]))
-    comp = np.rad2deg(_span_compliance(model)[joint] * m_req)
-    theta_u = (target - comp) / (float(model.span_gain[joint]) * max(n_units, 1))
+    idx, _, bend = _span_setup(model, joint, m_req, target, tie)
+    n_units = int(model.span_counts()[joint].sum())
+    if n_units == 0:
+        raise ValueError(f"the {JOINTS[joint]} span has no units: nothing to plan")
+    give = np.rad2deg(_span_compliance(model)[joint] * m_req)
+    theta_u = (target + give) / (float(model.span_gain[joint]) * n_units)
     unit = model.unit
     x = np.linspace(0.0, p_max, n)
-    full_p = np.full(n, p_max)
+    at_max = np.full(n, p_max)
     # (a) the free angle's point on the limit's top-pressure curve
     if theta_u >= 0:
-        b = _crossing(np.asarray(unit.free_angle_deg(full_p, x), float) - theta_u, x, p_max)
-        pt, pb = p_max, (0.0 if b is None else b)
+        pt, (pb, _) = p_max, _nearest_zero(np.asarray(unit.free_angle_deg(at_max, x), float) - theta_u, x, p_max)
     else:
-        t = _crossing(np.asarray(unit.free_angle_deg(x, full_p), float) - theta_u, x, p_max)
-        pt, pb = (0.0 if t is None else t), p_max
-    # (b) the moment: the top moves, the bottom held; else the bottom moves, the top held
+        (pt, _), pb = _nearest_zero(np.asarray(unit.free_angle_deg(x, at_max), float) - theta_u, x, p_max), p_max
+    # (b) the moment: the top moves, the bottom held; else the bottom moves, the top held; else the closest of both
+
+    def pair_of(p):
+        return np.tile(np.asarray(p, float), len(idx) // 2)[None, :]
+
     m = np.full(n, m_req)
-    t = _crossing(np.asarray(unit.angle_deg(x, np.full(n, pb), m), float) - theta_u, x, pt)
-    if t is not None:
-        pt = t
+    t, ok_t = _nearest_zero(np.asarray(unit.angle_deg(x, np.full(n, pb), m), float) - theta_u, x, pt)
+    if ok_t:
+        pt_pb = (t, pb)
     else:
-        b = _crossing(np.asarray(unit.angle_deg(np.full(n, pt), x, m), float) - theta_u, x, pb)
-        pb = pb if b is None else b
-    pair = np.array([pt, pb])
-    P = np.tile(pair, len(idx) // 2)[None, :]
+        b, ok_b = _nearest_zero(np.asarray(unit.angle_deg(np.full(n, pt), x, m), float) - theta_u, x, pb)
+        cands = [(pt, b)] if ok_b else [(pt, pb), (t, pb), (pt, b)]
+        pt_pb = min(cands, key=lambda c: abs(float(bend(pair_of(c))[0])))
+    P = pair_of(pt_pb)
     return dict(zip(idx, P[0])), float(bend(P)[0])
 
 

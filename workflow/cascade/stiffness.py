@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from workflow.cascade.model import CascadeModel, _required_moments
+from workflow.cascade.model import CascadeModel, _required_moments, _span_compliance
 
 __all__ = ["span_stiffness_nm_per_deg", "load_stiffness_nm_per_deg"]
 
 
 def span_stiffness_nm_per_deg(model, joint: int, p8: np.ndarray) -> np.ndarray:
-    """Rotational stiffness of a joint's span (N m per degree of span bend) at pressures ``p8`` (n, 8) kPa: its units
-    in series, 1 / sum_g n_g / k_g, with k_g the unit model's stiffness (``stiffness_nm_per_deg``)."""
+    """Rotational stiffness of a joint's span (N m per degree of joint rotation) at pressures ``p8`` (n, 8) kPa: its
+    units in series and the span's give, 1 / (g sum_g n_g / k_g + c), with k_g the unit model's stiffness
+    (``stiffness_nm_per_deg``), g the span's gain and c its give in degrees per N m (the straps' and the calibrated
+    rest, :mod:`workflow.cascade.model`)."""
     unit = model.unit
     if not hasattr(unit, "stiffness_nm_per_deg"):
         raise TypeError(f"{type(unit).__name__} has no stiffness_nm_per_deg: the stiffness planner needs one")
@@ -27,6 +29,7 @@ def span_stiffness_nm_per_deg(model, joint: int, p8: np.ndarray) -> np.ndarray:
         if counts[g]:
             k = np.asarray(unit.stiffness_nm_per_deg(p8[:, 2 * g], p8[:, 2 * g + 1]), float)
             compliance = compliance + counts[g] / k
+    compliance = float(model.span_gain[joint]) * compliance + np.rad2deg(_span_compliance(model)[joint])
     with np.errstate(divide="ignore"):
         return np.where(compliance > 0, 1.0 / compliance, np.inf)
 
