@@ -105,3 +105,36 @@ def test_a_bad_fit_set_is_refused_before_any_fea():
     np.testing.assert_allclose(sets["TGE1"], 50.0)
     with pytest.raises(ValueError, match=r"fit_pressures_2d_kpa\[1\].*within 0 and 100"):
         calibration_sets({"fit_pressures_2d_kpa": [[10] * 8, [150] + [0] * 7]}, t8, half, 100.0)
+
+
+def test_the_calibration_stage_fits_the_fea_states_and_judges_the_held_out_sets(monkeypatch):
+    # the FEA replaced by the double (its ramps' states at four load factors); the stage fits on the fit sets only,
+    # recovers the double's parameters and records every state, the sets' statuses and the held-out errors
+    from types import SimpleNamespace
+
+    from workflow.fea_check import calibration as FCAL
+
+    truth = fea_double()
+
+    def fake_gravity(fea, solver):
+        return SimpleNamespace(status=0, load_factor=1.0, joint_angles_deg=np.zeros(3), wall_time_s=0.0, reason="")
+
+    def fake_check(fea, name, p42, solver, gravity=None):
+        p8 = np.asarray(p42, float).ravel()
+        hist = [
+            {"phase": "pressure", "lam": lam, "joint_angles_deg": CAL.chain_angles(truth, lam * p8)[0][0]}
+            for lam in (0.25, 0.5, 0.75, 1.0)
+        ]
+        res = SimpleNamespace(status=0, load_factor=1.0, history=hist, newton_iterations=7)
+        return SimpleNamespace(result=res, angle_deg=hist[-1]["joint_angles_deg"], wall_time_s=0.1)
+
+    monkeypatch.setattr(FCAL, "gravity_state", fake_gravity)
+    monkeypatch.setattr(FCAL, "check_exercise", fake_check)
+    sets = {f"fit_{k}": p for k, p in enumerate(FIT, start=1)} | {f"TGE{k}": p for k, p in enumerate(HELD_OUT, 1)}
+    held = [f"TGE{k}" for k in range(1, 6)]
+    ds, cal = FCAL.run_chain_calibration(None, model(), sets, held, solver={})
+    np.testing.assert_allclose(cal.gain, GAIN, rtol=1e-3)
+    assert ds.sizes["state"] == 4 * len(sets) and int((ds["role"] == "held_out").sum()) == 4 * len(held)
+    assert ds.attrs["max_error_held_out_before_deg"] > 5.0 > 0.05 > ds.attrs["max_error_held_out_after_deg"]
+    assert list(ds["set_status"].values) == [0] * len(sets) and "flag_meanings" in ds["set_status"].attrs
+    np.testing.assert_allclose(ds["span_gain"].values, cal.gain)

@@ -20,7 +20,7 @@ import xarray as xr
 
 from workflow.cascade.calibration import ChainCalibration, calibrated, chain_angles, fit_chain
 from workflow.cascade.model import CascadeModel
-from workflow.common.constants import GROUPS, JOINTS, PRESSURE_NAMES
+from workflow.common.constants import GROUPS, JOINTS, PRESSURE_NAMES, SOLVER_STATUS
 from workflow.common.runlog import solved
 from workflow.fea_check.check import check_exercise, gravity_state
 from workflow.fea_check.model import PatientFEA
@@ -148,11 +148,28 @@ def run_chain_calibration(
             ),
             "error_before_deg": (("state", "joint"), err_b, {"units": "degree", "long_name": "chain before - FEA"}),
             "error_after_deg": (("state", "joint"), err_a, {"units": "degree", "long_name": "chain after - FEA"}),
-            "chain_converged": (("state", "stage"), np.stack([ok_b, ok_a], axis=1), {"long_name": "chain solved"}),
-            "set_status": (("set",), st[:, 0].astype("i1"), {"long_name": "FEA solve status (0 = full load)"}),
+            "chain_converged": (
+                ("state", "stage"),
+                np.stack([ok_b, ok_a], axis=1),
+                {"units": "1", "long_name": "the chain's equilibrium converged"},
+            ),
+            "set_status": (
+                ("set",),
+                st[:, 0].astype("i1"),
+                {
+                    "units": "1",
+                    "long_name": "FEA solve status of the set's ramp (0 = full load)",
+                    "flag_values": np.array(sorted(SOLVER_STATUS), dtype="i1"),
+                    "flag_meanings": " ".join(SOLVER_STATUS[int(v)] for v in sorted(SOLVER_STATUS)),
+                },
+            ),
             "set_load_factor": (("set",), st[:, 1], {"units": "1", "long_name": "load factor the FEA reached"}),
             "set_wall_time_s": (("set",), st[:, 2], {"units": "s", "long_name": "FEA wall time of the set"}),
-            "set_newton_iterations": (("set",), st[:, 3].astype("i4"), {"long_name": "Newton iterations"}),
+            "set_newton_iterations": (
+                ("set",),
+                st[:, 3].astype("i4"),
+                {"units": "1", "long_name": "Newton iterations"},
+            ),
             "set_pressure_2d_kpa": (
                 ("set", "pressure"),
                 np.array([sets[n] for n in names], float),

@@ -48,7 +48,7 @@ def _window(t: np.ndarray) -> np.ndarray:
     return t * t * (3.0 - 2.0 * t)
 
 
-def _tributary(p: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def tributary_areas(p: np.ndarray, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Slave nodes of a facet set and their tributary areas (reference configuration)."""
     x = p[:, facets].transpose(1, 2, 0)
     if p.shape[0] == 2:
@@ -211,7 +211,7 @@ class ContactPair:
         masters = master_facets if isinstance(master_facets, (list, tuple)) else [master_facets]
         if len(slaves) != len(masters):
             raise ValueError("one master wall per slave wall")
-        trib = [_tributary(p, f) for f in slaves]
+        trib = [tributary_areas(p, f) for f in slaves]
         starts = np.cumsum([0] + [f.shape[0] for f in masters])
         pools = [[np.arange(starts[k], starts[k + 1])] * nd.size for k, (nd, _) in enumerate(trib)]
         self._setup(
@@ -249,7 +249,7 @@ class ContactPair:
             # globally unique part ids (a surface without parts is one part)
             q = np.zeros(f.shape[0], int) if parts is None or parts[i] is None else np.asarray(parts[i], int)
             part_ids.append(q + (1 + max((int(x.max()) for x in part_ids), default=-1)))
-            nd, a = _tributary(p, f)
+            nd, a = tributary_areas(p, f)
             excl = _excluded(f, nd, None if parts is None else parts[i])
             allf = np.arange(f.shape[0])
             pool = [start + np.setdiff1d(allf, sorted(e)) for e in excl]

@@ -44,7 +44,7 @@ import numpy as np
 import skfem
 
 from workflow.fem._assembly import SolidAssembler
-from workflow.fem._contact import ContactPair, _tributary, contact_pairs_from_mesh
+from workflow.fem._contact import ContactPair, contact_pairs_from_mesh, tributary_areas
 from workflow.fem._mesh import UnitMesh
 from workflow.fem._overlap import overlap_measures
 from workflow.fem._solve import DEFAULT_SOLVER, Model, solve_path
@@ -265,7 +265,7 @@ def coupled_model(
         mcp = p[:, cm.finger_node(fm.nodes["joint_MCP"])]
         skin = np.unique(cm.um.facets["finger_dorsal"])
         y0 = float(p[1, skin[np.argmin(p[0, skin])]])
-        nodes, area = _tributary(p, cm.um.facets["outer_bottom"])
+        nodes, area = tributary_areas(p, cm.um.facets["outer_bottom"])
         over = p[0, nodes] < mcp[0] - 1e-9
         hand = SupportPlane(n, nodes[over], area[over], y0, eps, c["smoothing_mm"])
         extras.append(hand)
