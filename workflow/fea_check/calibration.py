@@ -72,14 +72,6 @@ def run_chain_calibration(
     """
     t0 = time.perf_counter()
     grav = gravity_state(fea, solver)
-    log.info(
-        "gravity: status %d at load factor %.3f, droop %s deg, %.1f s",
-        grav.status,
-        grav.load_factor,
-        np.round(grav.joint_angles_deg, 2),
-        grav.wall_time_s,
-        extra=solved(grav.status != 0),
-    )
     if grav.status != 0:
         raise RuntimeError(f"the calibration finger's gravity state did not converge ({grav.reason}): nothing to fit")
     names = list(sets)

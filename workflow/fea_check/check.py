@@ -54,6 +54,7 @@ from typing import Mapping
 import numpy as np
 
 from workflow.common.constants import GROUPS, JOINTS
+from workflow.common.runlog import solved
 from workflow.fea_check.model import PatientFEA
 from workflow.fem import cumulative_attempts, first_converged
 from workflow.fem.coupled import CoupledResult, solve_coupled
@@ -85,8 +86,18 @@ def solve_with_restarts(
 
 
 def gravity_state(fea: PatientFEA, solver: Mapping) -> CoupledResult:
-    """The finger and actuator under their weight alone (zero pressure)."""
-    return solve_with_restarts(fea, {}, solver)
+    """The finger and actuator under their weight alone (zero pressure); logs its status, droop and cost."""
+    grav = solve_with_restarts(fea, {}, solver)
+    log.info(
+        "gravity: status %d at load factor %.3f, droop %s deg, %d Newton iterations, %.1f s",
+        grav.status,
+        grav.load_factor,
+        np.round(grav.joint_angles_deg, 2),
+        grav.newton_iterations,
+        grav.wall_time_s,
+        extra=solved(grav.status != 0),
+    )
+    return grav
 
 
 @dataclass

@@ -311,15 +311,6 @@ def run_fea_check(
         else np.full(3, np.nan)
     )
     grav = gravity_state(fea, solver)
-    log.info(
-        "gravity: status %d at load factor %.3f, droop %s deg, %d Newton iterations, %.1f s",
-        grav.status,
-        grav.load_factor,
-        np.round(grav.joint_angles_deg, 2),
-        grav.newton_iterations,
-        grav.wall_time_s,
-        extra=solved(grav.status != 0),
-    )
     n_cor = int((correction or {}).get("max_iterations", 0)) if ro_plan is not None else 0
     checks, corrections, pred_2d = [], [], []
     for i, name in enumerate(ex):
