@@ -8,8 +8,9 @@ paper layer (height), z across the width:
   ``depth`` long and ``height`` tall, ``gap`` apart (no gap at the two ends,
   so the model is ``n*depth + (n-1)*gap`` = 22.4 mm long);
 * each block holds an air pocket inset by ``ac_th_for`` along the length and
-  ``ac_th_side`` across the width, from the block's base (the top of the base
-  layer) up to ``height - ac_th_up``;
+  ``ac_th_side`` across the width, from ``ac_th_down`` above the block's base
+  (the top of the base layer; Table 6 has no pocket floor, 0) up to
+  ``height - ac_th_up``;
 * the bottom side mirrors the top.  Air vents and ``ends_ext`` are left out.
 
 2D: the longitudinal section through the width's symmetry plane (plane strain,
@@ -57,6 +58,7 @@ DEFAULT_GEOMETRY: dict[str, float] = {
     "bot_layer": 2.0,
     "ac_th_for": 2.0,
     "ac_th_up": 2.0,
+    "ac_th_down": 0.0,
     "ac_th_side": 3.0,
     "paper_width": 0.2,
     "n_chambers": 3,
@@ -272,8 +274,11 @@ def _chain_mesh(
     tf, tu, ts, tp = g["ac_th_for"], g["ac_th_up"], g["ac_th_side"], g["paper_width"]
     L = n * d + (n - 1) * gap
     y0 = tp / 2
-    yb = y0 + bl  # top of the base layer = block base = pocket floor
+    yb = y0 + bl  # top of the base layer = block base
+    yf = yb + float(g.get("ac_th_down", 0.0))  # pocket floor (the block base unless the section has a floor)
     yp = yb + H - tu  # pocket roof
+    if yf < yb or yp - yf <= 1e-9 * max(H, 1.0):
+        raise ValueError(f"pocket floor {yf - yb:g} mm must lie below the pocket roof ({H - tu:g} mm above the base)")
     yt = yb + H  # block top
     xs = [-gap / 2, 0.0] if end_gaps else [0.0]
     for k in range(n):
@@ -284,16 +289,16 @@ def _chain_mesh(
     if end_gaps:
         xs.append(L + gap / 2)
     xb = np.array(xs)
-    ybr = np.array([-yt, -yp, -yb, -y0, y0, yb, yp, yt])
+    above = np.array([yb, yf, yp, yt]) if yf > yb else np.array([yb, yp, yt])  # breakpoints of one side
     xc = _divisions(xb, h)
     npap, nbase = layers
     yc = np.concatenate(
         [
-            _divisions(ybr[:3], h),
+            _divisions(-above[::-1], h),
             np.linspace(-yb, -y0, nbase + 1)[1:],
             np.linspace(-y0, y0, npap + 1)[1:],
             np.linspace(y0, yb, nbase + 1)[1:],
-            _divisions(ybr[5:], h)[1:],
+            _divisions(above, h)[1:],
         ]
     )
     coords = [xc, yc]
@@ -308,7 +313,7 @@ def _chain_mesh(
         hole = np.zeros(x.shape, bool)
         in_z = np.ones(x.shape, bool) if dim == 2 else c[2] < g["width"] / 2 - ts
         for a, b in pockets:
-            hole |= (x > a) & (x < b) & (ay > yb) & (ay < yp) & in_z
+            hole |= (x > a) & (x < b) & (ay > yf) & (ay < yp) & in_z
         for a, b in gaps:
             hole |= (x > a) & (x < b) & (ay > yb)
         hole |= ((x < 0) | (x > L)) & (ay > yb)  # the half gaps past the end blocks (end_gaps)
@@ -326,7 +331,7 @@ def _chain_mesh(
         sel = np.zeros(faces.shape[0], bool)
         in_z = np.ones(faces.shape[0], bool) if dim == 2 else mid[2] < g["width"] / 2 - ts + tol
         for a, b in pockets:
-            sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yb - tol) & (ys < yp + tol) & in_z
+            sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yf - tol) & (ys < yp + tol) & in_z
         facets[f"cavity_{side}"] = faces[sel]
     surfaces = []
     part_of: dict[str, np.ndarray] = {}  # per contact surface, the part (wall, floor, block side) of each facet
@@ -364,11 +369,11 @@ def _chain_mesh(
         in_z = np.ones(faces.shape[0], bool) if dim == 2 else mid[2] < g["width"] / 2 - ts - tol
         for k, (a, b) in enumerate(pockets):
             in_x = (mid[0] > a + tol) & (mid[0] < b - tol)
-            in_y = (ys > yb + tol) & (ys < yp - tol)
+            in_y = (ys > yf + tol) & (ys < yp - tol)
             walls = {
                 "left": (np.abs(mid[0] - a) < tol) & in_y & in_z,
                 "right": (np.abs(mid[0] - b) < tol) & in_y & in_z,
-                "floor": (np.abs(ys - yb) < tol) & in_x & in_z,
+                "floor": (np.abs(ys - yf) < tol) & in_x & in_z,
                 "roof": (np.abs(ys - yp) < tol) & in_x & in_z,
             }
             if dim == 3:
@@ -396,7 +401,7 @@ def _chain_mesh(
                 sel = np.zeros(faces.shape[0], bool)
                 for k, (a, b) in enumerate(pockets):
                     if groups[k] == name:
-                        sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yb - tol) & (ys < yp + tol) & in_z
+                        sel |= (mid[0] > a - tol) & (mid[0] < b + tol) & (ys > yf - tol) & (ys < yp + tol) & in_z
                 facets[f"cavity_{side}_{name}"] = faces[sel]
             facets[f"outer_{side}"] = faces[np.abs(ys - yt) < tol]
         nodes["backbone"] = np.flatnonzero(paper)
