@@ -189,6 +189,7 @@ def build_cascade(
     strap_stiffness_n_per_m: float = 240e3,
     gravity_m_s2: float | None = None,
     actuator_weight: bool = True,
+    layout_shift_mm: float = 0.0,
 ) -> CascadeModel:
     """Lay the actuator on the straight finger (see the module docstring).
 
@@ -198,7 +199,9 @@ def build_cascade(
     covers; L3MC from the finger's dimensions, 76.8 mm if absent);
     ``units_per_group`` overrides the rule group by group.  ``gravity_m_s2``
     defaults to the finger's.  ``actuator_weight=False`` makes the actuator
-    massless.
+    massless.  ``layout_shift_mm`` moves the whole actuator along the finger
+    (mm, distal positive) from where the CMC group ends at the MCP joint; the
+    spans stay group-wise (the MCP joint turns with the CMC and MCP groups).
     """
     sec = unit_section(actuator_dims_mm)
     lr = sec["unit_length_mm"] * 1e-3
@@ -213,7 +216,7 @@ def build_cascade(
         counts[g] = int(v)
     groups = np.concatenate([np.full(counts[g], i) for i, g in enumerate(GROUPS)])
     n = groups.size
-    base_x = -counts["CMC"] * lr
+    base_x = -counts["CMC"] * lr + float(layout_shift_mm) * 1e-3
     x = base_x + (np.arange(n) + 0.5) * lr
     y_b = finger.dorsal_y_m + sec["bottom_side_mm"] * 1e-3
     jx = finger.joints_ref[:, 0]

@@ -15,7 +15,7 @@ from workflow.cascade.finger import Finger
 from workflow.cascade.model import CascadeModel, build_cascade
 from workflow.common.constants import JOINTS
 
-__all__ = ["patient_finger", "patient_cascade", "plan_limit", "plan_options"]
+__all__ = ["linear_springs", "patient_finger", "patient_cascade", "plan_limit", "plan_options"]
 
 
 def patient_finger(
@@ -48,6 +48,11 @@ def patient_finger(
         loads["passive_moment_nm"].sel(joint=list(JOINTS)).values,
         *(curve if curve is not None else (None, None)),
     )
+    if c.get("joint_springs", "curve") == "linear":
+        # the authors' 2D model (its published generator): k = M(target) / target per joint, straight through zero
+        # (MCP 90, PIP 100, DIP 80 deg: each joint's largest target over the exercises)
+        springs = list(linear_springs(loads))
+        spring_note += "; linear springs through the passive moment at each target angle (cascade.joint_springs)"
     d = dict(c["densities"])
     if patient.get("model", "human") == "dummy":
         # The paper's test finger (Table 10): solid PLA of the same shape; its
@@ -63,6 +68,20 @@ def patient_finger(
         reference_dims_mm={k: float(v["mean"]) for k, v in measures.items()},
     )
     return fing, spring_note
+
+
+def linear_springs(loads) -> tuple[F.JointSpring, ...]:
+    """Per joint (MCP, PIP, DIP) a straight spring k = M / theta through the passive moment M (N m) at the joint's
+    largest target angle theta (deg) over the exercises of ``loads`` (a ``joint_loads.nc`` dataset)."""
+    th = np.atleast_2d(loads["target_angle_deg"].sel(joint=list(JOINTS)).values.T)  # (joint, exercise)
+    m = np.atleast_2d(loads["passive_moment_nm"].sel(joint=list(JOINTS)).values.T)
+    out = []
+    for j, joint in enumerate(JOINTS):
+        i = int(np.nanargmax(th[j]))
+        if not th[j, i] > 0:
+            raise ValueError(f"linear joint springs: no flexed target for {joint}")
+        out.append(F.JointSpring.linear(float(m[j, i]) / float(th[j, i])))
+    return tuple(out)
 
 
 def patient_cascade(
@@ -83,6 +102,7 @@ def patient_cascade(
         cmc_length_fraction=c["cmc_length_fraction"],
         tip_units=c["tip_units"],
         units_per_group=units_per_group or c.get("units_per_group") or None,
+        layout_shift_mm=float(c.get("layout_shift_mm", 0.0)),
         strap_stiffness_n_per_m=c["strap_stiffness_n_per_m"],
     )
 

@@ -169,7 +169,7 @@ def build_patient_fea(
     profiles = finger_profiles(finger, cascade_cfg["section_points"], ref_dims, fc["tip_min_depth_ratio"])
     fm = build_finger_mesh(profiles, h=float(fc["h_finger_mm"]))
     lr = geom["depth"] + geom["gap"]
-    base_x = -counts["CMC"] * lr
+    base_x = -counts["CMC"] * lr + float(cascade_cfg.get("layout_shift_mm", 0.0))  # as the chain lays it
     yt = geom["paper_width"] / 2 + geom["bot_layer"] + geom["height"]
     cm = couple_meshes(act, (base_x + geom["gap"] / 2, finger.dorsal_y_m * 1e3 + yt), fm)
     # materials
