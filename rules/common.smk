@@ -6,8 +6,9 @@ from snakemake.logging import logger
 from snakemake.utils import validate
 
 from workflow import settings
+from workflow.authors_study import settings as authors_settings
 from workflow.common import fidelity_choice
-from workflow.common.provenance import code_files
+from workflow.common.provenance import code_files, config_sha256
 
 validate(config, "../config/schema.yaml")
 # Checks JSON Schema cannot express (cross references between sections),
@@ -380,3 +381,96 @@ REPORT_DATASETS = {
 def get_report_dataset(wildcards):
     """Input function: the dataset behind one report table."""
     return REPORT_DATASETS[wildcards.table]
+
+
+# --- Stage authors' settings (not in the default run) -------------------
+
+AUTHORS_VARIANTS = authors_settings.variant_names(config["authors_study"])
+_AUTHORS_CONFIGS = {v: authors_settings.variant_config(config, v) for v in AUTHORS_VARIANTS}
+# every variant is a config of its own: checked like the base config, before any job starts
+for _v, _c in _AUTHORS_CONFIGS.items():
+    try:
+        validate(_c, "../config/schema.yaml")
+        settings.check_config(_c)
+    except Exception as _err:
+        raise ValueError(f"authors_study variant {_v}: {_err}") from None
+#: the variants that change the unit (silicone, section, paper): their 2D sweep and surrogate run again
+AUTHORS_UNIT_VARIANTS = [
+    v for v in AUTHORS_VARIANTS
+    if authors_settings.changes_unit(authors_settings.variant_overrides(config["authors_study"], v))
+]
+
+
+def authors_config(variant):
+    """One variant's whole config (the base config with the variant's overrides)."""
+    return _AUTHORS_CONFIGS[variant]
+
+
+def authors_patient():
+    """Whose plans the study checks (authors_study.patient, else the validation patient)."""
+    return config["authors_study"]["patient"] or config["cascade"]["validation_patient"]
+
+
+def authors_section(*keys):
+    """Param function: a variant's config section (keys nested, e.g. "surrogates", "unit_model")."""
+
+    def get(wildcards):
+        out = authors_config(wildcards.variant)
+        for k in keys:
+            out = out[k]
+        return out
+
+    return get
+
+
+def authors_surrogate(variant, fea):
+    """A variant's surrogate: its own 2D one where it changes the unit, else the default run's."""
+    if fea == "2d" and variant in AUTHORS_UNIT_VARIANTS:
+        return f"results/authors_study/{variant}/surrogate_2d.joblib"
+    return f"results/actuator/surrogate_{fea}.joblib"
+
+
+def get_authors_surrogates(wildcards):
+    """Input function: both surrogates of a variant's FEA check."""
+    return {f"surrogate_{f}": authors_surrogate(wildcards.variant, f) for f in ("2d", "3d")}
+
+
+def get_authors_sweep_shards(wildcards):
+    """Input function: the shard files of a variant's 2D unit sweep."""
+    s = authors_config(wildcards.variant)["sweep"]["2d"]
+    n = min(s["n_shards"], s["n_ratios"])
+    return expand("results/authors_study/{variant}/sweep/2d/shard{shard}.nc", variant=wildcards.variant, shard=range(n))
+
+
+def get_authors_slice(kind):
+    """Param function: the config a variant's job depends on, as the default run's rule of that ``kind`` (sweep,
+    plan, check) takes it from the variant's config (its hash goes into the outputs)."""
+
+    def get(wildcards):
+        c = authors_config(wildcards.variant)
+        if kind == "sweep":
+            return {"sweep": {"2d": c["sweep"]["2d"]}, "actuator": c["actuator"]}
+        name = authors_patient()
+        out = {
+            "patient": {name: c["patients"][name]},
+            "anthropometry": c["anthropometry"],
+            "exercises": c["exercises"],
+            "cascade": c["cascade"],
+            "unit_model": c["surrogates"]["unit_model"],
+            "pressure_limit": {k: c["actuator"]["material"][k] for k in ("p_limit_kpa", "p_limit_source")},
+        }
+        if kind == "check":
+            out |= {"actuator": c["actuator"], "fea_check": c["fea_check"]}
+        return out
+
+    return get
+
+
+def get_authors_checks():
+    """Input: every variant's FEA check of the study patient."""
+    return expand("results/authors_study/{variant}/{patient}/fea_check.nc", variant=AUTHORS_VARIANTS, patient=authors_patient())
+
+
+def get_authors_changes():
+    """Param: per variant the config keys it changes (dotted), for the study's table."""
+    return {v: authors_settings.changed_paths(config, authors_config(v)) for v in AUTHORS_VARIANTS}

@@ -28,6 +28,7 @@ LAYERS = [
     "actuator",
     "cascade",
     "fea_check",
+    "authors_study",
     "fidelity",
     "stability",
     "reporting",

@@ -38,6 +38,21 @@ def test_dry_run_of_the_default_config(tmp_path):
     assert "patient_loads" in proc.stdout
 
 
+def test_dry_run_of_the_authors_study_and_profile(tmp_path):
+    """The study: one FEA check and one plan per variant, a 2D sweep only for the variants that change the unit;
+    the profile file runs as the default target's config."""
+    _copy_workflow(tmp_path)
+    local = _local_overrides(tmp_path)
+    cfg = yaml.safe_load((tmp_path / "config" / "config.yaml").read_text())["authors_study"]
+    n_var = len(cfg["settings"]) + 2
+    jobs = _planned_jobs(_run(tmp_path, "-n", "--configfile", "config/config.yaml", str(local), "--", "authors_study"))
+    assert jobs["authors_check"] == jobs["authors_plan"] == n_var
+    assert jobs["authors_surrogate_fit"] == 4  # silicone, section, paper, all
+    assert "fea_check" not in jobs and "stability_maps" not in jobs  # the default run's own checks are not needed
+    proc = _run(tmp_path, "-n", "--configfile", "config/config.yaml", "config/authors_2d.yaml", str(local))
+    assert "cascade_plan" in _planned_jobs(proc)
+
+
 def test_bad_config_fails_before_any_job(tmp_path):
     _copy_workflow(tmp_path)
     (tmp_path / "config" / "bad.yaml").write_text("patients:\n  px:\n    measurements_mm: {L3PP: -4.0}\n")

@@ -1,0 +1,84 @@
+"""The variants' FEA checks joined: per variant and exercise the joint angles the FEA reached (after the correction
+step, where it ran), reached or not, and the largest strap force and actuator moment against the safety limits.
+
+Pure: takes the checks as datasets (``results/authors_study/{variant}/{patient}/fea_check.nc``), returns one.
+Angles in degrees, moments in N m, forces in N (full actuator width).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+
+from workflow.common.constants import JOINTS
+
+__all__ = ["final_state", "study_dataset"]
+
+
+def final_state(check: xr.Dataset) -> xr.Dataset:
+    """One check's outcome per exercise: the best corrected state where the correction ran, else the first solve."""
+    corrected = "corrected_angle_deg" in check
+    angle = check["corrected_angle_deg"] if corrected else check["angle_deg"]
+    reached = check["achieved_corrected"] if corrected else check["achieved"]
+    limit = check["active_limit_nm"].sel(joint=list(JOINTS))
+    moment = check["max_actuator_moment_nm"].sel(joint=list(JOINTS))
+    return xr.Dataset(
+        {
+            "angle_deg": angle.sel(joint=list(JOINTS)).astype(float),
+            "target_angle_deg": check["target_angle_deg"].sel(joint=list(JOINTS)).astype(float),
+            "reached": reached.astype(bool),
+            "converged": check["converged"].astype(bool),
+            "load_factor": check["load_factor"].astype(float),
+            "max_strap_force_n": check["max_strap_force_n"].max("strap").astype(float),
+            "max_actuator_moment_nm": np.abs(moment).max("joint").astype(float),
+            "moment_share_of_limit": (np.abs(moment) / limit).max("joint").astype(float),
+            "within_limits": check["within_limits"].astype(bool),
+        }
+    )
+
+
+def study_dataset(
+    checks: Mapping[str, xr.Dataset | None], changes: Mapping[str, Sequence[str]], reasons: Mapping[str, str] = {}
+) -> xr.Dataset:
+    """Join the variants' checks (variant -> dataset, or None where the variant's check is missing).
+
+    ``changes``: per variant the config keys it overrides (shown in the table); ``reasons``: per variant why a check
+    is missing. Exercises are the union over the variants; an exercise a variant did not check stays NaN / False.
+    """
+    names = list(checks)
+    states = {v: final_state(ds) for v, ds in checks.items() if ds is not None}
+    exercises = sorted({str(e) for s in states.values() for e in s["exercise"].values})
+    out = []
+    for v in names:
+        if v in states:
+            s = states[v].reindex(exercise=exercises)
+        else:
+            s = xr.Dataset(coords={"exercise": exercises, "joint": list(JOINTS)})
+        out.append(s)
+    ds = xr.concat(out, dim="variant", join="outer", data_vars="all").assign_coords(variant=names)
+    for name in ("reached", "converged", "within_limits"):
+        if name in ds:
+            ds[name] = ds[name].fillna(False).astype(bool)
+    deg, nm = {"units": "degree"}, {"units": "N m"}
+    attrs = {
+        "angle_deg": {**deg, "long_name": "joint angle the FEA reached (after the correction step where it ran)"},
+        "target_angle_deg": {**deg, "long_name": "the exercise's target joint angle"},
+        "reached": {"units": "1", "long_name": "every joint within the tolerance, moments within the active limits"},
+        "converged": {"units": "1", "long_name": "the first solve took the pressures in full"},
+        "load_factor": {"units": "1", "long_name": "last converged fraction of the first solve's pressures"},
+        "max_strap_force_n": {"units": "N", "long_name": "largest strap force along the load path"},
+        "max_actuator_moment_nm": {**nm, "long_name": "largest actuator moment about any joint along the load path"},
+        "moment_share_of_limit": {"units": "1", "long_name": "largest actuator moment / the joint's active limit"},
+        "within_limits": {"units": "1", "long_name": "every actuator moment within its active limit"},
+    }
+    for k, a in attrs.items():
+        if k in ds:
+            ds[k].attrs.update(a)
+    ds["n_reached"] = ("variant", ds["reached"].sum("exercise").values.astype("i4"), {"units": "1"})
+    ds["changes"] = ("variant", np.array(["; ".join(changes.get(v, ())) for v in names], dtype=object))
+    ds["changes"].attrs["long_name"] = "config keys the variant overrides"
+    ds["missing_reason"] = ("variant", np.array([reasons.get(v, "") for v in names], dtype=object))
+    ds["missing_reason"].attrs["long_name"] = "why the variant has no FEA check (empty: it has one)"
+    return ds
