@@ -6,6 +6,7 @@
 rule cascade_plan:
     input:
         unpack(get_chain_calibration),
+        unpack(get_layout_choice),
         unit_response=get_unit_response(),
         # the sweep behind the surrogate: planned pressures outside its converged samples are flagged
         response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),

@@ -474,3 +474,28 @@ def get_authors_checks():
 def get_authors_changes():
     """Param: per variant the config keys it changes (dotted), for the study's table."""
     return {v: authors_settings.changed_paths(config, authors_config(v)) for v in AUTHORS_VARIANTS}
+
+
+# --- Stage layout design (not in the default run) -------------------------
+def get_layout_calibration(wildcards):
+    """Input function: the chain's calibration, when the layout search runs on it (layout.calibrated)."""
+    return {"calibration": "results/validation/chain_calibration.nc"} if config["layout"]["calibrated"] else {}
+
+
+def get_layout_choice(wildcards):
+    """Input function: a designed patient's chosen layout, when its plan uses it (layout.use)."""
+    lay = config["layout"]
+    if lay["use"] and wildcards.patient in lay["patients"]:
+        return {"layout": f"results/patients/{wildcards.patient}/layout.nc"}
+    return {}
+
+
+def get_layout_slice(wildcards):
+    """Param function: the config the layout search depends on (the plan's slice and the layout section)."""
+    return get_cascade_slice(wildcards) | {"layout": {k: v for k, v in config["layout"].items() if k != "use"}}
+
+
+def get_layout_checks(wildcards):
+    """Input function: the FEA checks of the chain's best layouts of one patient."""
+    n = config["layout"]["confirm_top"]
+    return expand("results/patients/{patient}/layout/top{rank}/fea_check.nc", patient=wildcards.patient, rank=range(n))

@@ -29,6 +29,7 @@ LAYERS = [
     "cascade",
     "fea_check",
     "authors_study",
+    "layout",
     "fidelity",
     "stability",
     "reporting",

@@ -38,9 +38,9 @@ def test_dry_run_of_the_default_config(tmp_path):
     assert "patient_loads" in proc.stdout
 
 
-def test_dry_run_of_the_authors_study_and_profile(tmp_path):
-    """The study: one FEA check and one plan per variant, a 2D sweep only for the variants that change the unit;
-    the profile file runs as the default target's config."""
+def test_dry_run_of_the_studies_outside_the_default_run(tmp_path):
+    """The authors' settings: one FEA check and one plan per variant, a 2D sweep only for the variants that change
+    the unit; the profile file runs as the default target's config; the layout design's jobs."""
     _copy_workflow(tmp_path)
     local = _local_overrides(tmp_path)
     cfg = yaml.safe_load((tmp_path / "config" / "config.yaml").read_text())["authors_study"]
@@ -51,6 +51,11 @@ def test_dry_run_of_the_authors_study_and_profile(tmp_path):
     assert "fea_check" not in jobs and "stability_maps" not in jobs  # the default run's own checks are not needed
     proc = _run(tmp_path, "-n", "--configfile", "config/config.yaml", "config/authors_2d.yaml", str(local))
     assert "cascade_plan" in _planned_jobs(proc)
+    # the layout design: one search per patient, the best few planned and checked by FEA
+    lay = yaml.safe_load((tmp_path / "config" / "config.yaml").read_text())["layout"]
+    jobs = _planned_jobs(_run(tmp_path, "-n", "--configfile", "config/config.yaml", str(local), "--", "design_layouts"))
+    n = len(lay["patients"])
+    assert jobs["layout_search"] == n and jobs["layout_check"] == jobs["layout_plan"] == n * lay["confirm_top"]
 
 
 def test_bad_config_fails_before_any_job(tmp_path):

@@ -18,8 +18,10 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from workflow.cascade.model import unit_section
 from workflow.doe import ccd as doe
 from workflow.fem.material_stability import drucker_instabilities
+from workflow.layout.search import candidate_layouts
 
 __all__ = ["ConfigError", "check_config", "checked_patients", "load_config", "REPO_ROOT", "SCHEMA_PATH"]
 
@@ -84,6 +86,7 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
     if dummy and config["patients"][dummy].get("model", "human") != "dummy":
         raise ConfigError(f"cascade.dummy_patient = {dummy!r}: that patient needs `model: dummy`")
     checked_patients(config)  # raises on a name that is no patient
+    _check_layout(config)
     fid = config.get("fidelity", {})
     for ex in fid.get("check", {}).get("exercises", []):
         if ex not in config["exercises"]:
@@ -250,3 +253,28 @@ def checked_patients(config: Mapping[str, Any]) -> list[str]:
         if n not in patients:
             raise ConfigError(f"fea_check.patients: {n!r} is no patient (patients: {sorted(patients)})")
     return list(dict.fromkeys(names))
+
+
+def _check_layout(config: Mapping[str, Any]) -> None:
+    """The layout design's patients exist and its bounds hold at least one and at most max_candidates layouts."""
+    lay = config.get("layout") or {}
+    for name in lay.get("patients", []):
+        if name not in config["patients"]:
+            raise ConfigError(f"layout.patients: {name!r} is no patient (patients: {sorted(config['patients'])})")
+    if not lay.get("patients"):
+        return
+    c = config["cascade"]
+    sec = unit_section(c["unit_geometry_mm"])
+    d = c["densities"]
+    mass_g = (d["silicone"] * sec["silicone_mm3"] + d["paper"] * sec["paper_mm3"]) * 1e-6
+    try:
+        candidate_layouts(
+            lay["bounds"],
+            unit_length_mm=sec["unit_length_mm"],
+            unit_mass_g=mass_g,
+            max_length_mm=float(lay["max_length_mm"]),
+            max_mass_g=float(lay["max_mass_g"]),
+            max_candidates=int(lay["max_candidates"]),
+        )
+    except ValueError as err:
+        raise ConfigError(str(err).replace("layout bounds", "layout.bounds")) from None

@@ -1,0 +1,108 @@
+"""The layout design: the candidates honour their bounds, the exhaustive search returns the known optimum of a small
+synthetic problem, and the choice among the checked layouts follows the FEA, not the chain."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from workflow import settings
+from workflow.common.constants import GROUPS
+from workflow.layout.entry import chosen_units, top_units, write_layout_choice
+from workflow.layout.search import LayoutOutcome, candidate_layouts, rank_outcomes, search_layouts
+
+BOUNDS = {"CMC": [4, 6], "MCP": [5, 7], "PIP": [3, 5], "DIP": [3, 5]}
+
+
+def test_candidates_honour_the_group_length_and_mass_bounds():
+    every = candidate_layouts(BOUNDS, unit_length_mm=7.8, unit_mass_g=4.6)
+    assert len(every) == 3**4
+    short = candidate_layouts(BOUNDS, unit_length_mm=7.8, unit_mass_g=4.6, max_length_mm=7.8 * 17)
+    assert short and all(sum(c) <= 17 for c in short) and len(short) < len(every)
+    light = candidate_layouts(BOUNDS, unit_length_mm=7.8, unit_mass_g=4.6, max_mass_g=4.6 * 16)
+    assert len(light) == 5 and all(sum(c) <= 16 for c in light)  # the 15-unit minimum and its four +1 neighbours
+    with pytest.raises(ValueError, match="more than max_candidates"):
+        candidate_layouts(BOUNDS, unit_length_mm=7.8, unit_mass_g=4.6, max_candidates=10)
+    with pytest.raises(ValueError, match="no layout within"):
+        candidate_layouts(BOUNDS, unit_length_mm=7.8, unit_mass_g=4.6, max_length_mm=10.0)
+    with pytest.raises(ValueError, match="PIP = \\[5, 3\\]"):
+        candidate_layouts({**BOUNDS, "PIP": [5, 3]}, unit_length_mm=7.8, unit_mass_g=4.6)
+
+
+def test_the_search_returns_the_known_optimum_of_a_synthetic_problem():
+    # an exercise is reached when its span has enough units; more units need less pressure, but cost mass:
+    # the optimum reaches all three with the fewest units that do, at the least pressure among those
+    need = [(10, 0, 0), (10, 4, 0), (11, 4, 4)]  # (CMC+MCP, PIP, DIP) units each exercise needs
+
+    def evaluate(layout):
+        spans = (layout[0] + layout[1], layout[2], layout[3])
+        reached = tuple(all(s >= n for s, n in zip(spans, req)) for req in need)
+        pressure = 300.0 - 5.0 * sum(layout) + 0.1 * layout[0]  # CMC units are the dearest
+        return LayoutOutcome(layout, reached, pressure)
+
+    cands = candidate_layouts(BOUNDS, unit_length_mm=7.8, unit_mass_g=4.6)
+    seen = []
+    outcomes, order = search_layouts(cands, evaluate, progress=lambda i, n: seen.append((i, n)))
+    assert seen[-1] == (len(cands), len(cands))
+    best = outcomes[order[0]]
+    # every exercise needs 11 MCP-span, 4 PIP and 4 DIP units: the least pressure is the most units in all
+    assert best.n_reached == 3 and best.layout == (6, 7, 5, 5)
+    # the brute force agrees
+    full = [o for o in outcomes if o.n_reached == 3]
+    assert best.mean_pressure_kpa == min(o.mean_pressure_kpa for o in full)
+    # ties on reached and pressure go to the fewest units
+    a, b = LayoutOutcome((4, 5, 3, 3), (True,), 100.0), LayoutOutcome((5, 5, 3, 3), (True,), 100.0)
+    assert rank_outcomes([b, a]) == [1, 0]
+
+
+def _search(n=3):
+    units = np.array([[6, 7, 5, 5], [5, 6, 4, 4], [4, 5, 3, 3]], dtype="i4")[:n]
+    return xr.Dataset(
+        {
+            "units": (("candidate", "group"), units),
+            "reached": (("candidate", "exercise"), np.array([[True, True], [True, True], [True, False]])[:n]),
+            "n_reached": ("candidate", np.array([2, 2, 1])[:n]),
+            "mean_pressure_kpa": ("candidate", np.array([150.0, 180.0, 200.0])[:n]),
+            "length_mm": ("candidate", units.sum(axis=1) * 7.8),
+            "mass_g": ("candidate", units.sum(axis=1) * 4.6),
+            "rank": ("candidate", np.arange(n, dtype="i4")),
+        },
+        coords={"candidate": np.arange(n), "group": list(GROUPS), "exercise": ["TGE1", "TGE2"]},
+        attrs={"patient": "p", "chain": "double"},
+    )
+
+
+def _check(reached):
+    return xr.Dataset(
+        {"achieved_corrected": ("exercise", reached), "corrected_angle_deg": (("exercise", "joint"), np.zeros((2, 3)))},
+        coords={"exercise": ["TGE1", "TGE2"], "joint": ["MCP", "PIP", "DIP"]},
+    )
+
+
+def test_the_choice_follows_the_fea_not_the_chain(tmp_path):
+    search = tmp_path / "search.nc"
+    _search().to_netcdf(search)
+    checks = []
+    for k, r in enumerate([[False, False], [True, False], [True, False]]):
+        checks.append(tmp_path / f"c{k}.nc")
+        _check(r).to_netcdf(checks[-1])
+    ds = write_layout_choice(search, checks, out_nc=tmp_path / "layout.nc", out_png=tmp_path / "l.png", config_slice={})
+    # rank 0 is best on the chain but the FEA reaches nothing; ranks 1 and 2 reach TGE1: the cheaper (rank 1) wins
+    assert chosen_units(ds) == {"CMC": 5, "MCP": 6, "PIP": 4, "DIP": 4}
+    assert "rank 1" in ds.attrs["why"] and ds["fea_reached"].sum().item() == 2
+    assert top_units(_search(), 2) == {"CMC": 4, "MCP": 5, "PIP": 3, "DIP": 3}
+    assert (tmp_path / "l.png").stat().st_size > 0
+
+
+def test_layout_config_errors_name_the_key(config):
+    import copy
+
+    bad = copy.deepcopy(config)
+    bad["layout"]["patients"] = ["nobody"]
+    with pytest.raises(settings.ConfigError, match="layout.patients: 'nobody'"):
+        settings.check_config(bad)
+    bad = copy.deepcopy(config)
+    bad["layout"]["bounds"]["CMC"] = [1, 30]
+    with pytest.raises(settings.ConfigError, match="layout.bounds: .* candidates, more than max_candidates"):
+        settings.check_config(bad)

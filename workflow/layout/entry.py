@@ -1,0 +1,239 @@
+"""Entry points of the layout design: the search on the chain, the plan of one of its best candidates, and the choice
+among those the FEA checked. Angles deg, pressures kPa, lengths mm, masses g."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from workflow.cascade.calibration import calibrated
+from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
+from workflow.cascade.planning import plan_exercise
+from workflow.common.constants import GROUPS, JOINTS
+from workflow.common.provenance import open_result, write_dataset
+from workflow.layout.plots import plot_layouts
+from workflow.layout.search import LayoutOutcome, candidate_layouts, search_layouts
+
+__all__ = ["chosen_units", "top_units", "write_layout_choice", "write_layout_search"]
+
+log = logging.getLogger(__name__)
+
+
+def write_layout_search(
+    patient_name: str,
+    patient: Mapping[str, Any],
+    unit: Any,
+    *,
+    ccd_nc: str,
+    moments_nc: str,
+    joint_loads_nc: str,
+    cascade_cfg: Mapping[str, Any],
+    anthropometry: Mapping[str, Any],
+    layout_cfg: Mapping[str, Any],
+    out_nc: str | Path,
+    config_slice: Any,
+    calibration_nc: str | None = None,
+    material_limit: Any = None,
+    rule: str = "layout_search",
+) -> xr.Dataset:
+    """Plan every exercise on every candidate layout (the chain, calibrated when ``calibration_nc`` is given) and
+    rank the layouts; write ``out_nc``."""
+    c = cascade_cfg
+    loads = open_result(joint_loads_nc)
+    fing, _ = patient_finger(
+        patient, loads, open_result(moments_nc), open_result(ccd_nc), cascade_cfg=c, anthropometry=anthropometry
+    )
+    base = patient_cascade(fing, unit, c)
+    gains = compl = None
+    chain = "the paper's chain (no calibration)"
+    if calibration_nc is not None:
+        cal = open_result(calibration_nc)
+        gains, compl = cal["span_gain"].values, cal["span_compliance_rad_per_nm"].values
+        chain = f"calibrated to the 2D FEA of patient {cal.attrs['patient']}: gains {np.round(gains, 3).tolist()}"
+    lr_mm, mass_g = base.unit_length_m * 1e3, base.unit_mass_kg * 1e3
+    cands = candidate_layouts(
+        layout_cfg["bounds"],
+        unit_length_mm=lr_mm,
+        unit_mass_g=mass_g,
+        max_length_mm=float(layout_cfg["max_length_mm"]),
+        max_mass_g=float(layout_cfg["max_mass_g"]),
+        max_candidates=int(layout_cfg["max_candidates"]),
+    )
+    limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
+    limit = plan_limit(c, unit, material_limit)
+    opts = {**plan_options(c, limits, limit), "planner": str(c.get("planner", "paper"))}
+    targets = {
+        str(e): loads["target_angle_deg"].sel(exercise=e, joint=list(JOINTS)).values for e in loads["exercise"].values
+    }
+    log.info(
+        "patient %s: %d layouts within the bounds (unit %.2f mm, %.2f g); chain: %s; planner %s",
+        patient_name,
+        len(cands),
+        lr_mm,
+        mass_g,
+        chain,
+        opts["planner"],
+    )
+    pressures: dict[tuple[int, ...], np.ndarray] = {}
+
+    def evaluate(layout):
+        m = patient_cascade(fing, unit, c, units_per_group=dict(zip(GROUPS, layout)))
+        if gains is not None:
+            m = calibrated(m, gains, compl)
+        plans = [plan_exercise(m, t, exercise=name, **opts) for name, t in targets.items()]
+        p = np.array([pl.pressures_kpa for pl in plans])
+        pressures[layout] = p
+        return LayoutOutcome(layout, tuple(bool(pl.achieved) for pl in plans), float(p.mean()))
+
+    t0 = time.perf_counter()
+    step = max(1, len(cands) // 10)
+
+    def progress(i, n):
+        if i % step == 0 or i == n:
+            log.info("layouts planned: %d of %d, %.1f s", i, n, time.perf_counter() - t0)
+
+    outcomes, order = search_layouts(cands, evaluate, progress)
+    rank = np.empty(len(cands), dtype="i4")
+    rank[order] = np.arange(len(cands))
+    units = np.array(cands, dtype="i4")
+    ex = list(targets)
+    ds = xr.Dataset(
+        {
+            "units": (("candidate", "group"), units, {"units": "1", "long_name": "units per group"}),
+            "reached": (
+                ("candidate", "exercise"),
+                np.array([o.reached for o in outcomes]),
+                {"units": "1", "long_name": "reached on the chain"},
+            ),
+            "n_reached": ("candidate", np.array([o.n_reached for o in outcomes], dtype="i4"), {"units": "1"}),
+            "mean_pressure_kpa": (
+                "candidate",
+                np.array([o.mean_pressure_kpa for o in outcomes]),
+                {"units": "kPa", "long_name": "mean planned chamber pressure over the exercises"},
+            ),
+            "pressure_kpa": (
+                ("candidate", "exercise", "pressure"),
+                np.array([pressures[tuple(int(v) for v in c)] for c in cands]),
+                {"units": "kPa", "long_name": "planned pressures (P_T, P_B per group, Table 8's order)"},
+            ),
+            "length_mm": ("candidate", units.sum(axis=1) * lr_mm, {"units": "mm"}),
+            "mass_g": ("candidate", units.sum(axis=1) * mass_g, {"units": "g"}),
+            "rank": ("candidate", rank, {"units": "1", "long_name": "0 = best on the chain"}),
+        },
+        coords={"candidate": np.arange(len(cands)), "group": list(GROUPS), "exercise": ex, "pressure": np.arange(8)},
+    )
+    ds.attrs.update(
+        {
+            "patient": patient_name,
+            "chain": chain,
+            "planner": opts["planner"],
+            "search_wall_time_s": time.perf_counter() - t0,
+        }
+    )
+    best = order[0]
+    log.info(
+        "patient %s: best on the chain %s reaches %d of %d (%s) at %.1f kPa mean; default %s",
+        patient_name,
+        dict(zip(GROUPS, cands[best])),
+        outcomes[best].n_reached,
+        len(ex),
+        ", ".join(e for e, r in zip(ex, outcomes[best].reached) if r) or "none",
+        outcomes[best].mean_pressure_kpa,
+        base.n_per_group,
+    )
+    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice, title="Layouts searched on the reduced-order chain")
+    return ds
+
+
+def top_units(search: xr.Dataset, k: int) -> dict[str, int]:
+    """The units per group of the search's rank-``k`` layout (0 = best on the chain)."""
+    i = int(np.flatnonzero(search["rank"].values == int(k))[0])
+    return {str(g): int(v) for g, v in zip(search["group"].values, search["units"].values[i])}
+
+
+def chosen_units(choice: xr.Dataset) -> dict[str, int]:
+    """The units per group a layout choice (``layout.nc``) chose."""
+    return {str(g): int(v) for g, v in zip(choice["group"].values, choice["chosen_units"].values)}
+
+
+def write_layout_choice(
+    search_nc: str | Path,
+    check_ncs: Sequence[str | Path],
+    *,
+    out_nc: str | Path,
+    out_png: str | Path,
+    config_slice: Any,
+    rule: str = "layout_choice",
+) -> xr.Dataset:
+    """Choose among the chain's best layouts by their FEA checks (``check_ncs``, rank 0, 1, ...): the most exercises
+    the FEA reaches, then the least mean planned pressure, then the better chain rank."""
+    search = open_result(search_nc)
+    checks = [open_result(p) for p in check_ncs]
+    ex = [str(e) for e in search["exercise"].values]
+    rows = []
+    for k, chk in enumerate(checks):
+        reached = chk["achieved_corrected"] if "achieved_corrected" in chk else chk["achieved"]
+        fea = np.array([bool(reached.sel(exercise=e)) if e in chk["exercise"].values else False for e in ex])
+        i = int(np.flatnonzero(search["rank"].values == k)[0])
+        rows.append((k, i, fea))
+    key = [(-int(fea.sum()), float(search["mean_pressure_kpa"].values[i]), k) for k, i, fea in rows]
+    win = sorted(range(len(rows)), key=lambda j: key[j])[0]
+    k_w, i_w, fea_w = rows[win]
+    why = (
+        f"rank {k_w} on the chain; the FEA reaches {int(fea_w.sum())} of {len(ex)} "
+        f"({', '.join(e for e, r in zip(ex, fea_w) if r) or 'none'}); the most of the {len(rows)} checked, "
+        f"then the least mean planned pressure ({float(search['mean_pressure_kpa'].values[i_w]):.1f} kPa)"
+    )
+    ds = xr.Dataset(
+        {
+            "checked_units": (
+                ("checked", "group"),
+                np.array([search["units"].values[i] for _, i, _ in rows], dtype="i4"),
+            ),
+            "chain_reached": (("checked", "exercise"), np.array([search["reached"].values[i] for _, i, _ in rows])),
+            "fea_reached": (("checked", "exercise"), np.array([fea for *_, fea in rows])),
+            "fea_angle_deg": (
+                ("checked", "exercise", "joint"),
+                np.array(
+                    [
+                        (chk["corrected_angle_deg"] if "corrected_angle_deg" in chk else chk["angle_deg"])
+                        .reindex(exercise=ex)
+                        .sel(joint=list(JOINTS))
+                        .values
+                        for chk in checks
+                    ]
+                ),
+                {"units": "degree"},
+            ),
+            "checked_mean_pressure_kpa": (
+                "checked",
+                np.array([float(search["mean_pressure_kpa"].values[i]) for _, i, _ in rows]),
+                {"units": "kPa"},
+            ),
+            "chosen_units": ("group", np.array(search["units"].values[i_w], dtype="i4")),
+        },
+        coords={
+            "checked": np.arange(len(rows)),
+            "group": search["group"].values,
+            "exercise": ex,
+            "joint": list(JOINTS),
+        },
+    )
+    kept = search.drop_vars(["pressure_kpa", "pressure"], errors="ignore")
+    ds = ds.merge(kept.rename({k: f"search_{k}" for k in kept.data_vars}))
+    ds.attrs.update({"patient": search.attrs.get("patient", ""), "chain": search.attrs.get("chain", ""), "why": why})
+    log.info(
+        "patient %s: chosen layout %s: %s",
+        ds.attrs["patient"],
+        dict(zip(GROUPS, ds["chosen_units"].values.tolist())),
+        why,
+    )
+    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice, title="The layout chosen by the FEA check")
+    plot_layouts(ds, out_png)
+    return ds
