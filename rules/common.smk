@@ -472,8 +472,9 @@ def get_authors_checks():
 
 
 def get_authors_changes():
-    """Param: per variant the config keys it changes (dotted), for the study's table."""
-    return {v: authors_settings.changed_paths(config, authors_config(v)) for v in AUTHORS_VARIANTS}
+    """Param: per variant the config keys it changes against the baseline (dotted), for the study's table."""
+    base = authors_config(authors_settings.BASELINE)
+    return {v: authors_settings.changed_paths(base, authors_config(v)) for v in AUTHORS_VARIANTS}
 
 
 # --- Stage layout design (not in the default run) -------------------------

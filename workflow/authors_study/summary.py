@@ -35,6 +35,7 @@ def final_state(check: xr.Dataset) -> xr.Dataset:
             "max_actuator_moment_nm": np.abs(moment).max("joint").astype(float),
             "moment_share_of_limit": (np.abs(moment) / limit).max("joint").astype(float),
             "within_limits": check["within_limits"].astype(bool),
+            "reason": check["reason"].astype(str),
         }
     )
 
@@ -61,6 +62,8 @@ def study_dataset(
     for name in ("reached", "converged", "within_limits"):
         if name in ds:
             ds[name] = ds[name].fillna(False).astype(bool)
+    if "reason" in ds:
+        ds["reason"] = ds["reason"].fillna("").astype(object)
     deg, nm = {"units": "degree"}, {"units": "N m"}
     attrs = {
         "angle_deg": {**deg, "long_name": "joint angle the FEA reached (after the correction step where it ran)"},
@@ -72,6 +75,7 @@ def study_dataset(
         "max_actuator_moment_nm": {**nm, "long_name": "largest actuator moment about any joint along the load path"},
         "moment_share_of_limit": {"units": "1", "long_name": "largest actuator moment / the joint's active limit"},
         "within_limits": {"units": "1", "long_name": "every actuator moment within its active limit"},
+        "reason": {"units": "1", "long_name": "why the first solve missed the exercise (empty if it reached it)"},
     }
     for k, a in attrs.items():
         if k in ds:
