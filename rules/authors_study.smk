@@ -13,6 +13,7 @@ wildcard_constraints:
 
 use rule sweep_shard as authors_sweep_shard with:
     input:
+        unpack(get_fem_choice),
         code=code_files("scripts.sweep_shard"),
     output:
         "results/authors_study/{variant}/sweep/{fea}/shard{shard}.nc",
@@ -48,7 +49,8 @@ use rule sweep_merge as authors_sweep_merge with:
         config_slice=get_authors_slice("sweep"),
 
 
-# the default run's regressor choice (surrogate_cv) is kept: the study changes the unit, not the method
+# the default run's regressor choice (surrogate_cv) is kept: the study changes the unit, not the method; the sweeps
+# take the FE study's mesh as the default run's do (fidelity.auto)
 use rule surrogate_fit as authors_surrogate_fit with:
     input:
         response="results/authors_study/{variant}/response_{fea}.nc",
@@ -66,9 +68,11 @@ use rule surrogate_fit as authors_surrogate_fit with:
         variant="|".join(AUTHORS_UNIT_VARIANTS) or "NONE",
 
 
-# the plan stands on the default run's 3D unit (Table 6, Smooth-Sil 950), as every plan of the paper does
+# the plan stands on the default run's 3D unit (Table 6, Smooth-Sil 950), as every plan of the paper does, and on the
+# chain the default plans use (calibrated when cascade.calibration.use)
 use rule cascade_plan as authors_plan with:
     input:
+        unpack(get_chain_calibration),
         unit_response=get_unit_response(),
         response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),
         ccd="results/doe/ccd.nc",
@@ -85,9 +89,9 @@ use rule cascade_plan as authors_plan with:
     params:
         patient=get_patient,
         cascade=authors_section("cascade"),
-        anthropometry=config["anthropometry"],
-        unit_model=config["surrogates"]["unit_model"],
-        pressure_limit=get_pressure_limit(),
+        anthropometry=authors_section("anthropometry"),
+        unit_model=authors_section("surrogates", "unit_model"),
+        pressure_limit=get_authors_pressure_limit,
         config_slice=get_authors_slice("plan"),
 
 
@@ -116,8 +120,8 @@ use rule fea_check as authors_check with:
         fea_check=authors_section("fea_check"),
         actuator=authors_section("actuator"),
         cascade=authors_section("cascade"),
-        anthropometry=config["anthropometry"],
-        unit_model=config["surrogates"]["unit_model"],
+        anthropometry=authors_section("anthropometry"),
+        unit_model=authors_section("surrogates", "unit_model"),
         tolerance_deg=config["fidelity"]["tolerance"]["check_deg"],
         config_slice=get_authors_slice("check"),
 

@@ -423,6 +423,12 @@ def authors_section(*keys):
     return get
 
 
+def get_authors_pressure_limit(wildcards):
+    """Param function: a variant's silicone pressure limit and its source."""
+    m = authors_config(wildcards.variant)["actuator"]["material"]
+    return {k: m[k] for k in ("p_limit_kpa", "p_limit_source")}
+
+
 def authors_surrogate(variant, fea):
     """A variant's surrogate: its own 2D one where it changes the unit, else the default run's."""
     if fea == "2d" and variant in AUTHORS_UNIT_VARIANTS:
@@ -450,7 +456,7 @@ def get_authors_slice(kind):
         c = authors_config(wildcards.variant)
         if kind == "sweep":
             return {"sweep": {"2d": c["sweep"]["2d"]}, "actuator": c["actuator"]}
-        name = authors_patient()
+        name = wildcards.patient
         out = {
             "patient": {name: c["patients"][name]},
             "anthropometry": c["anthropometry"],
@@ -491,9 +497,21 @@ def get_layout_choice(wildcards):
     return {}
 
 
+def layout_search_cfg():
+    """The layout section as the search reads it (not which patients, how many to check, or whether plans use it)."""
+    return {k: config["layout"][k] for k in ("bounds", "max_length_mm", "max_mass_g", "max_candidates", "calibrated")}
+
+
+def layout_cascade_cfg():
+    """The cascade section as the layout search reads it: the calibration's use is layout.calibrated's business."""
+    c = dict(config["cascade"])
+    c["calibration"] = {k: v for k, v in c["calibration"].items() if k != "use"}
+    return c
+
+
 def get_layout_slice(wildcards):
-    """Param function: the config the layout search depends on (the plan's slice and the layout section)."""
-    return get_cascade_slice(wildcards) | {"layout": {k: v for k, v in config["layout"].items() if k != "use"}}
+    """Param function: the config the layout search depends on."""
+    return get_cascade_slice(wildcards) | {"cascade": layout_cascade_cfg(), "layout": layout_search_cfg()}
 
 
 def get_layout_checks(wildcards):

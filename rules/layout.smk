@@ -25,20 +25,21 @@ rule layout_search:
         "../envs/project.yaml"
     params:
         patient=get_patient,
-        cascade=config["cascade"],
+        cascade=layout_cascade_cfg(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
-        layout=config["layout"],
+        layout=layout_search_cfg(),
         pressure_limit=get_pressure_limit(),
         config_slice=get_layout_slice,
     script:
         "../workflow/scripts/layout_search.py"
 
 
-# the plan of the chain's rank-k layout: the default plan rule, its units per group read from the search
+# the plan of the chain's rank-k layout: the default plan rule on the chain the search ranked on, its units per group
+# read from the search
 use rule cascade_plan as layout_plan with:
     input:
-        unpack(get_chain_calibration),
+        unpack(get_layout_calibration),
         unit_response=get_unit_response(),
         response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),
         ccd="results/doe/ccd.nc",
@@ -65,10 +66,11 @@ use rule cascade_plan as layout_plan with:
         config_slice=lambda wildcards: get_cascade_slice(wildcards) | {"layout_rank": int(wildcards.rank)},
 
 
+# the check's mesh is fea_check.h_actuator_mm: the mesh study checks the validation patient's plan, which with
+# layout.use depends on this check
 use rule fea_check as layout_check with:
     input:
         unpack(get_fea_surrogates),
-        unpack(get_check_choice),
         plan="results/patients/{patient}/layout/top{rank}/cascade_plan.nc",
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",

@@ -283,6 +283,41 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     assert abs(res.slide_force) < 1e-3 * weight  # the regularising spring carries next to nothing
 
 
+def test_the_layout_shift_moves_the_fe_actuator_as_the_chain_lays_it():
+    """cascade.layout_shift_mm moves the FE actuator along the finger by the shift (mm, distal positive), as
+    build_cascade moves the chain's units; the finger stays where it is."""
+    from pathlib import Path
+
+    import yaml
+
+    from workflow.fea_check.model import build_patient_fea
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "config.yaml").read_text())
+    finger = mean_finger(springs=[F.JointSpring.linear(1e-3)] * 3, densities=DENSITIES)
+    feas = []
+    for shift in (0.0, -25.8):
+        casc = dict(cfg["cascade"], section_points=str(SECTION), layout_shift_mm=shift)
+        feas.append(
+            build_patient_fea(
+                finger,
+                {"CMC": 2, "MCP": 6, "PIP": 4, "DIP": 4},
+                actuator_cfg=cfg["actuator"],
+                cascade_cfg=casc,
+                reference_dims_mm={k: v["mean"] for k, v in measures().items()},
+                fea_cfg={"h_actuator_mm": 3.0, "h_finger_mm": 3.0},
+            )
+        )
+    a, b = feas
+    assert b.base_x_mm - a.base_x_mm == pytest.approx(-25.8)
+    act_a, act_b = (f.setup.cm.body == -1 for f in feas)
+    xa = a.setup.cm.mesh.p[0][np.unique(a.setup.cm.mesh.t[:, act_a])]
+    xb = b.setup.cm.mesh.p[0][np.unique(b.setup.cm.mesh.t[:, act_b])]
+    assert xb.min() - xa.min() == pytest.approx(-25.8) and xb.max() - xa.max() == pytest.approx(-25.8)
+    fa = a.setup.cm.mesh.p[0][np.unique(a.setup.cm.mesh.t[:, ~act_a])]
+    fb = b.setup.cm.mesh.p[0][np.unique(b.setup.cm.mesh.t[:, ~act_b])]
+    assert np.allclose(np.sort(fa), np.sort(fb))
+
+
 def test_rigid_rotation_update_is_exact_for_rotations_and_first_order_otherwise():
     from workflow.fem.finger2d import RigidRotationUpdate
 

@@ -9,7 +9,8 @@ import xarray as xr
 
 from workflow import settings
 from workflow.common.constants import GROUPS
-from workflow.layout.entry import chosen_units, top_units, write_layout_choice
+from workflow.layout.entry import write_layout_choice
+from workflow.layout.units import chosen_units, top_units
 from workflow.layout.search import LayoutOutcome, candidate_layouts, rank_outcomes, search_layouts
 
 BOUNDS = {"CMC": [4, 6], "MCP": [5, 7], "PIP": [3, 5], "DIP": [3, 5]}
@@ -56,19 +57,19 @@ def test_the_search_returns_the_known_optimum_of_a_synthetic_problem():
     assert rank_outcomes([b, a]) == [1, 0]
 
 
-def _search(n=3):
-    units = np.array([[6, 7, 5, 5], [5, 6, 4, 4], [4, 5, 3, 3]], dtype="i4")[:n]
+def _search():
+    units = np.array([[6, 7, 5, 5], [5, 6, 4, 4], [4, 5, 3, 3]], dtype="i4")
     return xr.Dataset(
         {
             "units": (("candidate", "group"), units),
-            "reached": (("candidate", "exercise"), np.array([[True, True], [True, True], [True, False]])[:n]),
-            "n_reached": ("candidate", np.array([2, 2, 1])[:n]),
-            "mean_pressure_kpa": ("candidate", np.array([150.0, 180.0, 200.0])[:n]),
+            "reached": (("candidate", "exercise"), np.array([[True, True], [True, True], [True, False]])),
+            "n_reached": ("candidate", np.array([2, 2, 1])),
+            "mean_pressure_kpa": ("candidate", np.array([150.0, 180.0, 200.0])),
             "length_mm": ("candidate", units.sum(axis=1) * 7.8),
             "mass_g": ("candidate", units.sum(axis=1) * 4.6),
-            "rank": ("candidate", np.arange(n, dtype="i4")),
+            "rank": ("candidate", np.array([1, 2, 0], dtype="i4")),  # the candidates' order is not the ranks'
         },
-        coords={"candidate": np.arange(n), "group": list(GROUPS), "exercise": ["TGE1", "TGE2"]},
+        coords={"candidate": np.arange(3), "group": list(GROUPS), "exercise": ["TGE1", "TGE2"]},
         attrs={"patient": "p", "chain": "double"},
     )
 
@@ -88,10 +89,14 @@ def test_the_choice_follows_the_fea_not_the_chain(tmp_path):
         checks.append(tmp_path / f"c{k}.nc")
         _check(r).to_netcdf(checks[-1])
     ds = write_layout_choice(search, checks, out_nc=tmp_path / "layout.nc", out_png=tmp_path / "l.png", config_slice={})
-    # rank 0 is best on the chain but the FEA reaches nothing; ranks 1 and 2 reach TGE1: the cheaper (rank 1) wins
-    assert chosen_units(ds) == {"CMC": 5, "MCP": 6, "PIP": 4, "DIP": 4}
+    # rank 0 (candidate 2) is best on the chain but the FEA reaches nothing; ranks 1 and 2 (candidates 0 and 1)
+    # reach TGE1: the cheaper, rank 1 = candidate 0, wins
+    assert chosen_units(ds) == {"CMC": 6, "MCP": 7, "PIP": 5, "DIP": 5}
     assert "rank 1" in ds.attrs["why"] and ds["fea_reached"].sum().item() == 2
-    assert top_units(_search(), 2) == {"CMC": 4, "MCP": 5, "PIP": 3, "DIP": 3}
+    assert ds["checked_units"].values[0].tolist() == [4, 5, 3, 3]  # checked in rank order
+    assert top_units(_search(), 2) == {"CMC": 5, "MCP": 6, "PIP": 4, "DIP": 4}
+    with pytest.raises(ValueError, match="none of rank 3"):
+        top_units(_search(), 3)
     assert (tmp_path / "l.png").stat().st_size > 0
 
 
@@ -101,6 +106,15 @@ def test_layout_config_errors_name_the_key(config):
     bad = copy.deepcopy(config)
     bad["layout"]["patients"] = ["nobody"]
     with pytest.raises(settings.ConfigError, match="layout.patients: 'nobody'"):
+        settings.check_config(bad)
+    bad = copy.deepcopy(config)
+    bad["layout"]["confirm_top"] = 400
+    with pytest.raises(settings.ConfigError, match="layout.confirm_top = 400: the bounds hold only"):
+        settings.check_config(bad)
+    bad = copy.deepcopy(config)
+    bad["layout"].update(use=True, calibrated=True)
+    bad["cascade"]["calibration"]["use"] = False
+    with pytest.raises(settings.ConfigError, match="another chain than the one the layouts were chosen on"):
         settings.check_config(bad)
     bad = copy.deepcopy(config)
     bad["layout"]["bounds"]["CMC"] = [1, 30]

@@ -56,6 +56,11 @@ def test_dry_run_of_the_studies_outside_the_default_run(tmp_path):
     jobs = _planned_jobs(_run(tmp_path, "-n", "--configfile", "config/config.yaml", str(local), "--", "design_layouts"))
     n = len(lay["patients"])
     assert jobs["layout_search"] == n and jobs["layout_check"] == jobs["layout_plan"] == n * lay["confirm_top"]
+    # plans that use the chosen layouts: no cycle through the check's mesh study
+    use = tmp_path / "config" / "use_layout.yaml"
+    use.write_text(yaml.safe_dump({"layout": {"use": True}, "cascade": {"calibration": {"use": True}}}))
+    jobs = _planned_jobs(_run(tmp_path, "-n", "--configfile", "config/config.yaml", str(local), str(use)))
+    assert jobs["layout_choice"] == n and jobs["cascade_plan"] >= n
 
 
 def test_bad_config_fails_before_any_job(tmp_path):

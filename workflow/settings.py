@@ -263,18 +263,28 @@ def _check_layout(config: Mapping[str, Any]) -> None:
             raise ConfigError(f"layout.patients: {name!r} is no patient (patients: {sorted(config['patients'])})")
     if not lay.get("patients"):
         return
+    if lay.get("use") and bool(lay["calibrated"]) != bool(config["cascade"]["calibration"]["use"]):
+        raise ConfigError(
+            f"layout.use with layout.calibrated = {lay['calibrated']} but cascade.calibration.use = "
+            f"{config['cascade']['calibration']['use']}: the plans would stand on another chain than the one the "
+            "layouts were chosen on; set both alike"
+        )
     c = config["cascade"]
     sec = unit_section(c["unit_geometry_mm"])
     d = c["densities"]
     mass_g = (d["silicone"] * sec["silicone_mm3"] + d["paper"] * sec["paper_mm3"]) * 1e-6
     try:
-        candidate_layouts(
-            lay["bounds"],
-            unit_length_mm=sec["unit_length_mm"],
-            unit_mass_g=mass_g,
-            max_length_mm=float(lay["max_length_mm"]),
-            max_mass_g=float(lay["max_mass_g"]),
-            max_candidates=int(lay["max_candidates"]),
+        n = len(
+            candidate_layouts(
+                lay["bounds"],
+                unit_length_mm=sec["unit_length_mm"],
+                unit_mass_g=mass_g,
+                max_length_mm=float(lay["max_length_mm"]),
+                max_mass_g=float(lay["max_mass_g"]),
+                max_candidates=int(lay["max_candidates"]),
+            )
         )
     except ValueError as err:
         raise ConfigError(str(err).replace("layout bounds", "layout.bounds")) from None
+    if int(lay["confirm_top"]) > n:
+        raise ConfigError(f"layout.confirm_top = {lay['confirm_top']}: the bounds hold only {n} layouts")

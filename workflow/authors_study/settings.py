@@ -90,10 +90,9 @@ def variant_overrides(study: Mapping[str, Any], name: str) -> dict[str, Any]:
 
 
 def changes_unit(overrides: Mapping[str, Any]) -> bool:
-    """Whether a variant changes the actuator unit (its material or section), so that its 2D unit sweep and
-    surrogate must be computed again."""
-    act = overrides.get("actuator", {})
-    return bool(act.get("material") or act.get("geometry") or act.get("formulation"))
+    """Whether a variant changes the actuator unit or its sweep (any ``actuator`` or ``sweep`` key), so that its 2D
+    unit sweep and surrogate must be computed again."""
+    return bool(overrides.get("actuator")) or bool(overrides.get("sweep"))
 
 
 def variant_config(config: Mapping[str, Any], name: str) -> dict[str, Any]:

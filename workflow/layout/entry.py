@@ -19,8 +19,9 @@ from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
 from workflow.layout.plots import plot_layouts
 from workflow.layout.search import LayoutOutcome, candidate_layouts, search_layouts
+from workflow.layout.units import top_units
 
-__all__ = ["chosen_units", "top_units", "write_layout_choice", "write_layout_search"]
+__all__ = ["write_layout_choice", "write_layout_search"]
 
 log = logging.getLogger(__name__)
 
@@ -151,17 +152,6 @@ def write_layout_search(
     return ds
 
 
-def top_units(search: xr.Dataset, k: int) -> dict[str, int]:
-    """The units per group of the search's rank-``k`` layout (0 = best on the chain)."""
-    i = int(np.flatnonzero(search["rank"].values == int(k))[0])
-    return {str(g): int(v) for g, v in zip(search["group"].values, search["units"].values[i])}
-
-
-def chosen_units(choice: xr.Dataset) -> dict[str, int]:
-    """The units per group a layout choice (``layout.nc``) chose."""
-    return {str(g): int(v) for g, v in zip(choice["group"].values, choice["chosen_units"].values)}
-
-
 def write_layout_choice(
     search_nc: str | Path,
     check_ncs: Sequence[str | Path],
@@ -180,6 +170,7 @@ def write_layout_choice(
     for k, chk in enumerate(checks):
         reached = chk["achieved_corrected"] if "achieved_corrected" in chk else chk["achieved"]
         fea = np.array([bool(reached.sel(exercise=e)) if e in chk["exercise"].values else False for e in ex])
+        top_units(search, k)  # raises if the search holds no rank-k layout
         i = int(np.flatnonzero(search["rank"].values == k)[0])
         rows.append((k, i, fea))
     key = [(-int(fea.sum()), float(search["mean_pressure_kpa"].values[i]), k) for k, i, fea in rows]

@@ -4,7 +4,7 @@ from workflow.actuator.surrogates import load_surrogate
 from workflow.actuator.unit_model import UnitModel
 from workflow.cascade.entry import write_cascade_plan
 from workflow.common.provenance import open_result
-from workflow.layout.entry import chosen_units, top_units
+from workflow.layout.units import chosen_units, top_units
 from workflow.scripts._common import setup_logging
 
 log = setup_logging(snakemake)  # noqa: F821
