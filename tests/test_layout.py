@@ -10,8 +10,8 @@ import xarray as xr
 from workflow import settings
 from workflow.common.constants import GROUPS
 from workflow.layout.entry import write_layout_choice
-from workflow.layout.units import chosen_units, top_units
 from workflow.layout.search import LayoutOutcome, candidate_layouts, rank_outcomes, search_layouts
+from workflow.layout.units import chosen_units, top_units
 
 BOUNDS = {"CMC": [4, 6], "MCP": [5, 7], "PIP": [3, 5], "DIP": [3, 5]}
 
