@@ -396,7 +396,8 @@ for _v, _c in _AUTHORS_CONFIGS.items():
         raise ValueError(f"authors_study variant {_v}: {_err}") from None
 #: the variants that change the unit (silicone, section, paper): their 2D sweep and surrogate run again
 AUTHORS_UNIT_VARIANTS = [
-    v for v in AUTHORS_VARIANTS
+    v
+    for v in AUTHORS_VARIANTS
     if authors_settings.changes_unit(authors_settings.variant_overrides(config["authors_study"], v))
 ]
 
@@ -474,7 +475,9 @@ def get_authors_slice(kind):
 
 def get_authors_checks():
     """Input: every variant's FEA check of the study patient."""
-    return expand("results/authors_study/{variant}/{patient}/fea_check.nc", variant=AUTHORS_VARIANTS, patient=authors_patient())
+    return expand(
+        "results/authors_study/{variant}/{patient}/fea_check.nc", variant=AUTHORS_VARIANTS, patient=authors_patient()
+    )
 
 
 def get_authors_changes():

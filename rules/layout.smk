@@ -78,7 +78,9 @@ use rule fea_check as layout_check with:
         code=code_files("scripts.fea_check"),
     output:
         nc="results/patients/{patient}/layout/top{rank}/fea_check.nc",
-        vtu=expand("results/patients/{{patient}}/layout/top{{rank}}/fea_check_{exercise}.vtu", exercise=get_fea_exercises()),
+        vtu=expand(
+            "results/patients/{{patient}}/layout/top{{rank}}/fea_check_{exercise}.vtu", exercise=get_fea_exercises()
+        ),
         plot="results/patients/{patient}/layout/top{rank}/fea_check.png",
     log:
         "logs/layout/layout_check/{patient}_{rank}.log",
