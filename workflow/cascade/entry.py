@@ -6,6 +6,7 @@ and 10.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -23,6 +24,28 @@ from workflow.common.constants import JOINTS
 from workflow.common.provenance import open_result, write_dataset
 
 __all__ = ["write_cascade_plan", "write_cascade_validation"]
+
+
+def read_calibration(calibration_nc: str | Path, patient_name: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """The span gains and compliances (rad/N m, per joint) of a chain calibration (``chain_calibration.nc``) and a
+    note on them; a fit that did not converge raises, a calibration on another patient's finger warns."""
+    cal = open_result(calibration_nc)
+    if int(cal.attrs["fit_status"]) <= 0:  # least_squares: 0 = evaluations spent, -1 = bad input
+        raise RuntimeError(f"{calibration_nc}: the chain's fit did not converge ({cal.attrs['fit_message']})")
+    if str(cal.attrs["patient"]) != patient_name:
+        logging.getLogger(__name__).warning(
+            "patient %s: the chain calibrated on patient %s's finger is applied to this one (the gains describe "
+            "the actuator's coupling to a finger, fitted on one)",
+            patient_name,
+            cal.attrs["patient"],
+        )
+    gain, compliance = cal["span_gain"].values, cal["span_compliance_rad_per_nm"].values
+    note = (
+        f"calibrated to the 2D FEA of patient {cal.attrs['patient']}: gains {np.round(gain, 3).tolist()}, "
+        f"compliances {np.round(compliance, 3).tolist()} rad/N m; held-out error "
+        f"{cal.attrs['max_error_held_out_before_deg']:.1f} -> {cal.attrs['max_error_held_out_after_deg']:.1f} deg"
+    )
+    return gain, compliance, note
 
 
 def write_cascade_plan(
@@ -72,23 +95,8 @@ def write_cascade_plan(
     model = patient_cascade(fing, unit, c)
     chain_note = "the paper's chain (no calibration)"
     if calibration_nc is not None:
-        cal = open_result(calibration_nc)
-        if int(cal.attrs["fit_status"]) <= 0:  # least_squares: 0 = evaluations spent, -1 = bad input
-            raise RuntimeError(f"{calibration_nc}: the chain's fit did not converge ({cal.attrs['fit_message']})")
-        if str(cal.attrs["patient"]) != patient_name:
-            log.warning(
-                "patient %s: the chain calibrated on patient %s's finger is applied to this one (the gains describe "
-                "the actuator's coupling to a finger, fitted on one)",
-                patient_name,
-                cal.attrs["patient"],
-            )
-        model = calibrated(model, cal["span_gain"].values, cal["span_compliance_rad_per_nm"].values)
-        chain_note = (
-            f"calibrated to the 2D FEA of patient {cal.attrs['patient']}: gains "
-            f"{np.round(model.span_gain, 3).tolist()}, compliances {np.round(model.span_compliance_rad_per_nm, 3).tolist()} "
-            f"rad/N m; held-out error {cal.attrs['max_error_held_out_before_deg']:.1f} -> "
-            f"{cal.attrs['max_error_held_out_after_deg']:.1f} deg"
-        )
+        gain, compliance, chain_note = read_calibration(calibration_nc, patient_name)
+        model = calibrated(model, gain, compliance)
     log.info("patient %s: chain: %s", patient_name, chain_note)
     limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
     targets = {

@@ -13,13 +13,14 @@ import numpy as np
 import xarray as xr
 
 from workflow.cascade.calibration import calibrated
+from workflow.cascade.entry import read_calibration
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
 from workflow.cascade.planning import plan_exercise
 from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
 from workflow.layout.plots import plot_layouts
 from workflow.layout.search import LayoutOutcome, candidate_layouts, search_layouts
-from workflow.layout.units import top_units
+from workflow.layout.units import rank_index
 
 __all__ = ["write_layout_choice", "write_layout_search"]
 
@@ -54,9 +55,7 @@ def write_layout_search(
     gains = compl = None
     chain = "the paper's chain (no calibration)"
     if calibration_nc is not None:
-        cal = open_result(calibration_nc)
-        gains, compl = cal["span_gain"].values, cal["span_compliance_rad_per_nm"].values
-        chain = f"calibrated to the 2D FEA of patient {cal.attrs['patient']}: gains {np.round(gains, 3).tolist()}"
+        gains, compl, chain = read_calibration(calibration_nc, patient_name)
     lr_mm, mass_g = base.unit_length_m * 1e3, base.unit_mass_kg * 1e3
     cands = candidate_layouts(
         layout_cfg["bounds"],
@@ -81,7 +80,6 @@ def write_layout_search(
         chain,
         opts["planner"],
     )
-    pressures: dict[tuple[int, ...], np.ndarray] = {}
 
     def evaluate(layout):
         m = patient_cascade(fing, unit, c, units_per_group=dict(zip(GROUPS, layout)))
@@ -89,8 +87,7 @@ def write_layout_search(
             m = calibrated(m, gains, compl)
         plans = [plan_exercise(m, t, exercise=name, **opts) for name, t in targets.items()]
         p = np.array([pl.pressures_kpa for pl in plans])
-        pressures[layout] = p
-        return LayoutOutcome(layout, tuple(bool(pl.achieved) for pl in plans), float(p.mean()))
+        return LayoutOutcome(layout, tuple(bool(pl.achieved) for pl in plans), float(p.mean()), p)
 
     t0 = time.perf_counter()
     step = max(1, len(cands) // 10)
@@ -120,7 +117,7 @@ def write_layout_search(
             ),
             "pressure_kpa": (
                 ("candidate", "exercise", "pressure"),
-                np.array([pressures[tuple(int(v) for v in c)] for c in cands]),
+                np.array([o.pressures_kpa for o in outcomes]),
                 {"units": "kPa", "long_name": "planned pressures (P_T, P_B per group, Table 8's order)"},
             ),
             "length_mm": ("candidate", units.sum(axis=1) * lr_mm, {"units": "mm"}),
@@ -170,12 +167,9 @@ def write_layout_choice(
     for k, chk in enumerate(checks):
         reached = chk["achieved_corrected"] if "achieved_corrected" in chk else chk["achieved"]
         fea = np.array([bool(reached.sel(exercise=e)) if e in chk["exercise"].values else False for e in ex])
-        top_units(search, k)  # raises if the search holds no rank-k layout
-        i = int(np.flatnonzero(search["rank"].values == k)[0])
-        rows.append((k, i, fea))
-    key = [(-int(fea.sum()), float(search["mean_pressure_kpa"].values[i]), k) for k, i, fea in rows]
-    win = sorted(range(len(rows)), key=lambda j: key[j])[0]
-    k_w, i_w, fea_w = rows[win]
+        rows.append((k, rank_index(search, k), fea))
+    # the most exercises the FEA reaches, then the least mean planned pressure, then the better chain rank
+    k_w, i_w, fea_w = min(rows, key=lambda r: (-int(r[2].sum()), float(search["mean_pressure_kpa"].values[r[1]]), r[0]))
     why = (
         f"rank {k_w} on the chain; the FEA reaches {int(fea_w.sum())} of {len(ex)} "
         f"({', '.join(e for e, r in zip(ex, fea_w) if r) or 'none'}); the most of the {len(rows)} checked, "
