@@ -28,6 +28,8 @@ class LayoutOutcome:
     layout: tuple[int, int, int, int]
     reached: tuple[bool, ...]
     mean_pressure_kpa: float
+    #: the planned pressures (exercise, 8) kPa, where the forward model gives them
+    pressures_kpa: np.ndarray | None = None
 
     @property
     def n_reached(self) -> int:
