@@ -65,6 +65,7 @@ __all__ = [
     "UnitResponse",
     "unit_counts",
     "unit_section",
+    "actuator_start_mm",
     "CascadeModel",
     "build_cascade",
     "actuator_gravity_moments_nm",
@@ -175,6 +176,13 @@ class CascadeModel:
         return out
 
 
+def actuator_start_mm(n_cmc: int, unit_length_mm: float, layout_shift_mm: float = 0.0) -> float:
+    """Where the actuator's proximal end lies along the straight finger, mm from the MCP joint (distal positive):
+    the CMC group ends at the MCP joint, then the whole actuator moves by ``layout_shift_mm``. The chain and the FEA
+    check lay the actuator by this one rule."""
+    return -int(n_cmc) * float(unit_length_mm) + float(layout_shift_mm)
+
+
 def build_cascade(
     finger: Finger,
     unit: Any,
@@ -216,7 +224,7 @@ def build_cascade(
         counts[g] = int(v)
     groups = np.concatenate([np.full(counts[g], i) for i, g in enumerate(GROUPS)])
     n = groups.size
-    base_x = -counts["CMC"] * lr + float(layout_shift_mm) * 1e-3
+    base_x = actuator_start_mm(counts["CMC"], sec["unit_length_mm"], layout_shift_mm) * 1e-3
     x = base_x + (np.arange(n) + 0.5) * lr
     y_b = finger.dorsal_y_m + sec["bottom_side_mm"] * 1e-3
     jx = finger.joints_ref[:, 0]

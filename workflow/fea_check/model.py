@@ -39,7 +39,7 @@ import numpy as np
 
 from workflow import fem
 from workflow.cascade.finger import Finger, _read_section_profile
-from workflow.cascade.model import unit_section
+from workflow.cascade.model import actuator_start_mm, unit_section
 from workflow.common.constants import GROUPS
 from workflow.fem._mesh import build_actuator_mesh
 from workflow.fem.coupled import CoupledSetup, cell_areas, couple_meshes, nodal_body_force
@@ -169,7 +169,7 @@ def build_patient_fea(
     profiles = finger_profiles(finger, cascade_cfg["section_points"], ref_dims, fc["tip_min_depth_ratio"])
     fm = build_finger_mesh(profiles, h=float(fc["h_finger_mm"]))
     lr = geom["depth"] + geom["gap"]
-    base_x = -counts["CMC"] * lr + float(cascade_cfg.get("layout_shift_mm", 0.0))  # as the chain lays it
+    base_x = actuator_start_mm(counts["CMC"], lr, cascade_cfg.get("layout_shift_mm", 0.0))
     yt = geom["paper_width"] / 2 + geom["bot_layer"] + geom["height"]
     cm = couple_meshes(act, (base_x + geom["gap"] / 2, finger.dorsal_y_m * 1e3 + yt), fm)
     # materials
