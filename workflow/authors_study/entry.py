@@ -35,7 +35,7 @@ def study_table(ds) -> pd.DataFrame:
                     "load factor": float(s["load_factor"]),
                     "largest strap force (N)": float(s["max_strap_force_n"]),
                     "largest moment / limit": float(s["moment_share_of_limit"]),
-                    "why not reached (first solve)": str(s["reason"].item()) if "reason" in s else "",
+                    "why not reached (first solve)": str(s["reason"].item()),
                 }
             )
     return pd.DataFrame(rows).set_index(["variant", "exercise"])

@@ -40,30 +40,20 @@ def final_state(check: xr.Dataset) -> xr.Dataset:
     )
 
 
-def study_dataset(
-    checks: Mapping[str, xr.Dataset | None], changes: Mapping[str, Sequence[str]], reasons: Mapping[str, str] = {}
-) -> xr.Dataset:
-    """Join the variants' checks (variant -> dataset, or None where the variant's check is missing).
+def study_dataset(checks: Mapping[str, xr.Dataset], changes: Mapping[str, Sequence[str]]) -> xr.Dataset:
+    """Join the variants' checks (variant -> dataset; every variant has one: a failed solve is an outcome in it).
 
-    ``changes``: per variant the config keys it overrides (shown in the table); ``reasons``: per variant why a check
-    is missing. Exercises are the union over the variants; an exercise a variant did not check stays NaN / False.
+    ``changes``: per variant the config keys it overrides (shown in the table). Exercises are the union over the
+    variants; an exercise a variant did not check stays NaN / False.
     """
     names = list(checks)
-    states = {v: final_state(ds) for v, ds in checks.items() if ds is not None}
-    exercises = sorted({str(e) for s in states.values() for e in s["exercise"].values})
-    out = []
-    for v in names:
-        if v in states:
-            s = states[v].reindex(exercise=exercises)
-        else:
-            s = xr.Dataset(coords={"exercise": exercises, "joint": list(JOINTS)})
-        out.append(s)
-    ds = xr.concat(out, dim="variant", join="outer", data_vars="all").assign_coords(variant=names)
+    states = [final_state(ds) for ds in checks.values()]
+    exercises = sorted({str(e) for s in states for e in s["exercise"].values})
+    ds = xr.concat([s.reindex(exercise=exercises) for s in states], dim="variant", join="outer", data_vars="all")
+    ds = ds.assign_coords(variant=names)
     for name in ("reached", "converged", "within_limits"):
-        if name in ds:
-            ds[name] = ds[name].fillna(False).astype(bool)
-    if "reason" in ds:
-        ds["reason"] = ds["reason"].fillna("").astype(object)
+        ds[name] = ds[name].fillna(False).astype(bool)
+    ds["reason"] = ds["reason"].fillna("").astype(object)
     deg, nm = {"units": "degree"}, {"units": "N m"}
     attrs = {
         "angle_deg": {**deg, "long_name": "joint angle the FEA reached (after the correction step where it ran)"},
@@ -78,11 +68,8 @@ def study_dataset(
         "reason": {"units": "1", "long_name": "why the first solve missed the exercise (empty if it reached it)"},
     }
     for k, a in attrs.items():
-        if k in ds:
-            ds[k].attrs.update(a)
+        ds[k].attrs.update(a)
     ds["n_reached"] = ("variant", ds["reached"].sum("exercise").values.astype("i4"), {"units": "1"})
     ds["changes"] = ("variant", np.array(["; ".join(changes.get(v, ())) for v in names], dtype=object))
     ds["changes"].attrs["long_name"] = "config keys the variant overrides"
-    ds["missing_reason"] = ("variant", np.array([reasons.get(v, "") for v in names], dtype=object))
-    ds["missing_reason"].attrs["long_name"] = "why the variant has no FEA check (empty: it has one)"
     return ds
