@@ -249,29 +249,35 @@ def test_applied_pressures_stay_under_the_silicone_limit():
     assert list(flag[0]) == [2, 4, 0]  # 600 kPa needed: capped at 250; equal pair cut back; 200 kPa mapped
 
 
-def test_straps_hold_the_finger_on_the_actuator_under_gravity():
-    """Coupled model at a coarse mesh, gravity only: the finger hangs from the straps,
-    the strap points stay on the actuator (gap = force / k) and no contact penetrates
-    beyond the bound of config fea_check.penetration_bound_mm (0.1 mm)."""
+def _coarse_patient_fea(springs, **cascade):
+    """The mean finger's coupled model at 3 mm elements under a 2/6/4/4 actuator (config's actuator and cascade,
+    ``cascade`` keys over the latter)."""
     from pathlib import Path
 
     import yaml
 
-    from workflow.fea_check.model import DEFAULT_FEA_CHECK, build_patient_fea
-    from workflow.fem.coupled import solve_coupled
+    from workflow.fea_check.model import build_patient_fea
 
     cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "config.yaml").read_text())
-    springs = [F.JointSpring.linear(k / 90.0) for k in (0.15, 0.06, 0.02)]
-    finger = mean_finger(springs=springs, densities=DENSITIES)
-    casc = dict(cfg["cascade"], section_points=str(SECTION))
-    fea = build_patient_fea(
-        finger,
+    return build_patient_fea(
+        mean_finger(springs=springs, densities=DENSITIES),
         {"CMC": 2, "MCP": 6, "PIP": 4, "DIP": 4},
         actuator_cfg=cfg["actuator"],
-        cascade_cfg=casc,
+        cascade_cfg=dict(cfg["cascade"], section_points=str(SECTION), **cascade),
         reference_dims_mm={k: v["mean"] for k, v in measures().items()},
         fea_cfg={"h_actuator_mm": 3.0, "h_finger_mm": 3.0},
     )
+
+
+def test_straps_hold_the_finger_on_the_actuator_under_gravity():
+    """Coupled model at a coarse mesh, gravity only: the finger hangs from the straps,
+    the strap points stay on the actuator (gap = force / k) and no contact penetrates
+    beyond the bound of config fea_check.penetration_bound_mm (0.1 mm)."""
+    from workflow.fea_check.model import DEFAULT_FEA_CHECK
+    from workflow.fem.coupled import solve_coupled
+
+    springs = [F.JointSpring.linear(k / 90.0) for k in (0.15, 0.06, 0.02)]
+    fea = _coarse_patient_fea(springs)
     res = solve_coupled(fea.setup, {}, solver=dict(SOLVER, atol=1e-6, max_steps=150))
     assert res.status == 0 and res.phase == "pressure" and res.load_factor == 1.0
     assert res.max_penetration_mm <= DEFAULT_FEA_CHECK["penetration_bound_mm"]
@@ -286,27 +292,7 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
 def test_the_layout_shift_moves_the_fe_actuator_as_the_chain_lays_it():
     """cascade.layout_shift_mm moves the FE actuator along the finger by the shift (mm, distal positive), as
     build_cascade moves the chain's units; the finger stays where it is."""
-    from pathlib import Path
-
-    import yaml
-
-    from workflow.fea_check.model import build_patient_fea
-
-    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "config.yaml").read_text())
-    finger = mean_finger(springs=[F.JointSpring.linear(1e-3)] * 3, densities=DENSITIES)
-    feas = []
-    for shift in (0.0, -25.8):
-        casc = dict(cfg["cascade"], section_points=str(SECTION), layout_shift_mm=shift)
-        feas.append(
-            build_patient_fea(
-                finger,
-                {"CMC": 2, "MCP": 6, "PIP": 4, "DIP": 4},
-                actuator_cfg=cfg["actuator"],
-                cascade_cfg=casc,
-                reference_dims_mm={k: v["mean"] for k, v in measures().items()},
-                fea_cfg={"h_actuator_mm": 3.0, "h_finger_mm": 3.0},
-            )
-        )
+    feas = [_coarse_patient_fea([F.JointSpring.linear(1e-3)] * 3, layout_shift_mm=s) for s in (0.0, -25.8)]
     a, b = feas
     assert b.base_x_mm - a.base_x_mm == pytest.approx(-25.8)
     act_a, act_b = (f.setup.cm.body == -1 for f in feas)
