@@ -502,7 +502,10 @@ def get_layout_choice(wildcards):
 
 def layout_search_cfg():
     """The layout section as the search reads it (not which patients, how many to check, or whether plans use it)."""
-    return {k: config["layout"][k] for k in ("bounds", "max_length_mm", "max_mass_g", "max_candidates", "calibrated")}
+    return {
+        k: config["layout"][k]
+        for k in ("bounds", "max_length_mm", "max_mass_g", "max_overhang_mm", "max_candidates", "calibrated")
+    }
 
 
 def layout_cascade_cfg():

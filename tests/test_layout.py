@@ -10,7 +10,7 @@ import xarray as xr
 from workflow import settings
 from workflow.common.constants import GROUPS
 from workflow.layout.entry import write_layout_choice
-from workflow.layout.search import LayoutOutcome, candidate_layouts, rank_outcomes, search_layouts
+from workflow.layout.search import LayoutOutcome, candidate_layouts, overhang_mm, rank_outcomes, search_layouts
 from workflow.layout.units import chosen_units, top_units
 
 BOUNDS = {"CMC": [4, 6], "MCP": [5, 7], "PIP": [3, 5], "DIP": [3, 5]}
@@ -29,6 +29,23 @@ def test_candidates_honour_the_group_length_and_mass_bounds():
         candidate_layouts(BOUNDS, unit_length_mm=7.8, unit_mass_g=4.6, max_length_mm=10.0)
     with pytest.raises(ValueError, match="PIP = \\[5, 3\\]"):
         candidate_layouts({**BOUNDS, "PIP": [5, 3]}, unit_length_mm=7.8, unit_mass_g=4.6)
+
+
+def test_candidates_honour_the_overhang_past_the_fingertip():
+    """The CMC group ends at the MCP joint, so MCP + PIP + DIP units set the overhang: with a tip 100 mm past the MCP
+    joint and 10 mm units, at most 10 mm of overhang leaves the layouts of at most 11 distal units."""
+    every = candidate_layouts(BOUNDS, unit_length_mm=10.0, unit_mass_g=4.6)
+    kept = candidate_layouts(BOUNDS, unit_length_mm=10.0, unit_mass_g=4.6, tip_mm=100.0, max_overhang_mm=10.0)
+    assert kept == [c for c in every if sum(c[1:]) <= 11]  # the CMC count does not matter
+    assert len(kept) == 3 * 1  # MCP 5, PIP 3, DIP 3 with any of the three CMC counts
+    assert overhang_mm((4, 5, 3, 3), unit_length_mm=10.0, tip_mm=100.0) == pytest.approx(10.0)
+    # the whole actuator moved 20 mm proximally: the overhang falls by 20 mm, two more units per layout fit
+    shifted = candidate_layouts(
+        BOUNDS, unit_length_mm=10.0, unit_mass_g=4.6, tip_mm=100.0, max_overhang_mm=10.0, layout_shift_mm=-20.0
+    )
+    assert shifted == [c for c in every if sum(c[1:]) <= 13]
+    with pytest.raises(ValueError, match="no layout within .* and -50 mm past the fingertip"):
+        candidate_layouts(BOUNDS, unit_length_mm=10.0, unit_mass_g=4.6, tip_mm=100.0, max_overhang_mm=-50.0)
 
 
 def test_the_search_returns_the_known_optimum_of_a_synthetic_problem():

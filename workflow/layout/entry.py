@@ -19,7 +19,7 @@ from workflow.cascade.planning import plan_exercise
 from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
 from workflow.layout.plots import plot_layouts
-from workflow.layout.search import LayoutOutcome, candidate_layouts, search_layouts
+from workflow.layout.search import LayoutOutcome, candidate_layouts, overhang_mm, search_layouts
 from workflow.layout.units import rank_index
 
 __all__ = ["write_layout_choice", "write_layout_search"]
@@ -57,12 +57,16 @@ def write_layout_search(
     if calibration_nc is not None:
         gains, compl, chain = read_calibration(calibration_nc, patient_name)
     lr_mm, mass_g = base.unit_length_m * 1e3, base.unit_mass_kg * 1e3
+    tip_mm, shift_mm = fing.tip_x_m * 1e3, float(c.get("layout_shift_mm", 0.0))
     cands = candidate_layouts(
         layout_cfg["bounds"],
         unit_length_mm=lr_mm,
         unit_mass_g=mass_g,
         max_length_mm=float(layout_cfg["max_length_mm"]),
         max_mass_g=float(layout_cfg["max_mass_g"]),
+        tip_mm=tip_mm,
+        max_overhang_mm=float(layout_cfg["max_overhang_mm"]),
+        layout_shift_mm=shift_mm,
         max_candidates=int(layout_cfg["max_candidates"]),
     )
     limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
@@ -72,11 +76,14 @@ def write_layout_search(
         str(e): loads["target_angle_deg"].sel(exercise=e, joint=list(JOINTS)).values for e in loads["exercise"].values
     }
     log.info(
-        "patient %s: %d layouts within the bounds (unit %.2f mm, %.2f g); chain: %s; planner %s",
+        "patient %s: %d layouts within the bounds (unit %.2f mm, %.2f g; tip %.1f mm past the MCP joint, at most "
+        "%g mm overhang); chain: %s; planner %s",
         patient_name,
         len(cands),
         lr_mm,
         mass_g,
+        tip_mm,
+        float(layout_cfg["max_overhang_mm"]),
         chain,
         opts["planner"],
     )
@@ -122,6 +129,13 @@ def write_layout_search(
             ),
             "length_mm": ("candidate", units.sum(axis=1) * lr_mm, {"units": "mm"}),
             "mass_g": ("candidate", units.sum(axis=1) * mass_g, {"units": "g"}),
+            "overhang_mm": (
+                "candidate",
+                np.array(
+                    [overhang_mm(u, unit_length_mm=lr_mm, tip_mm=tip_mm, layout_shift_mm=shift_mm) for u in cands]
+                ),
+                {"units": "mm", "long_name": "how far the actuator reaches past the fingertip (negative: short of it)"},
+            ),
             "rank": ("candidate", rank, {"units": "1", "long_name": "0 = best on the chain"}),
         },
         coords={"candidate": np.arange(len(cands)), "group": list(GROUPS), "exercise": ex, "pressure": np.arange(8)},
@@ -131,6 +145,7 @@ def write_layout_search(
             "patient": patient_name,
             "chain": chain,
             "planner": opts["planner"],
+            "tip_mm": tip_mm,
             "search_wall_time_s": time.perf_counter() - t0,
         }
     )

@@ -1,7 +1,9 @@
 """Units per group searched against a forward model: every layout within the bounds, ranked.
 
 A layout is the number of units of each group (CMC, MCP, PIP, DIP). The candidates are every integer combination
-within per-group bounds whose actuator is no longer and no heavier than the bounds allow. Each is scored by an
+within per-group bounds whose actuator is no longer and no heavier than the bounds allow and reaches no further past
+the fingertip than the overhang bound (the actuator's CMC group ends at the MCP joint, see
+:func:`workflow.cascade.model.actuator_start_mm`, so the distal groups set how far it overhangs the tip). Each is scored by an
 ``evaluate`` callable (the reduced-order chain's plans, or any double of it in tests) and ranked: most exercises
 reached first, then the least mean planned pressure (kPa), then the fewest units. The search is exhaustive, so it
 returns the optimum of the ranking over the candidates, not a local one; its cost is one evaluation per candidate,
@@ -16,9 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workflow.cascade.model import actuator_start_mm
 from workflow.common.constants import GROUPS
 
-__all__ = ["LayoutOutcome", "candidate_layouts", "rank_outcomes", "search_layouts"]
+__all__ = ["LayoutOutcome", "candidate_layouts", "overhang_mm", "rank_outcomes", "search_layouts"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +44,13 @@ class LayoutOutcome:
         return (-self.n_reached, round(float(p), 9), int(sum(self.layout)))
 
 
+def overhang_mm(layout: Sequence[int], *, unit_length_mm: float, tip_mm: float, layout_shift_mm: float = 0.0) -> float:
+    """How far the actuator of ``layout`` (CMC, MCP, PIP, DIP units) reaches past the fingertip, mm (negative: it ends
+    short of the tip). ``tip_mm``: the tip's distance from the MCP joint on the straight finger."""
+    start = actuator_start_mm(layout[0], unit_length_mm, layout_shift_mm)
+    return start + sum(int(v) for v in layout) * float(unit_length_mm) - float(tip_mm)
+
+
 def candidate_layouts(
     bounds: Mapping[str, Sequence[int]],
     *,
@@ -48,13 +58,17 @@ def candidate_layouts(
     unit_mass_g: float,
     max_length_mm: float = np.inf,
     max_mass_g: float = np.inf,
+    tip_mm: float | None = None,
+    max_overhang_mm: float = np.inf,
+    layout_shift_mm: float = 0.0,
     max_candidates: int | None = None,
 ) -> list[tuple[int, int, int, int]]:
     """Every (CMC, MCP, PIP, DIP) within ``bounds`` ({group: [lo, hi]}, inclusive) whose actuator length
-    (units x ``unit_length_mm``) and mass (units x ``unit_mass_g``) are within the bounds.
+    (units x ``unit_length_mm``), mass (units x ``unit_mass_g``) and, when ``tip_mm`` is given, overhang past the
+    fingertip (:func:`overhang_mm`, mm) are within the bounds.
 
-    Raises ``ValueError`` for a missing or reversed bound, a bound below one unit, or more candidates than
-    ``max_candidates``.
+    Raises ``ValueError`` for a missing or reversed bound, a bound below one unit, no layout within the bounds, or
+    more candidates than ``max_candidates``.
     """
     ranges = []
     for g in GROUPS:
@@ -64,14 +78,25 @@ def candidate_layouts(
         if lo < 1 or hi < lo:
             raise ValueError(f"layout bounds: {g} = [{lo}, {hi}] must satisfy 1 <= lo <= hi")
         ranges.append(range(lo, hi + 1))
+
+    def overhangs(c):
+        if tip_mm is None:
+            return False
+        return overhang_mm(c, unit_length_mm=unit_length_mm, tip_mm=tip_mm, layout_shift_mm=layout_shift_mm) > (
+            max_overhang_mm + 1e-9
+        )
+
     out = [
         c
         for c in itertools.product(*ranges)
-        if sum(c) * unit_length_mm <= max_length_mm + 1e-9 and sum(c) * unit_mass_g <= max_mass_g + 1e-9
+        if sum(c) * unit_length_mm <= max_length_mm + 1e-9
+        and sum(c) * unit_mass_g <= max_mass_g + 1e-9
+        and not overhangs(c)
     ]
     if not out:
+        past = f" and {max_overhang_mm:g} mm past the fingertip" if tip_mm is not None else ""
         raise ValueError(
-            f"layout bounds: no layout within {max_length_mm:g} mm and {max_mass_g:g} g "
+            f"layout bounds: no layout within {max_length_mm:g} mm, {max_mass_g:g} g{past} "
             f"(a unit is {unit_length_mm:g} mm and {unit_mass_g:.3g} g)"
         )
     if max_candidates is not None and len(out) > max_candidates:
