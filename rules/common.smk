@@ -521,6 +521,10 @@ def get_layout_slice(wildcards):
 
 
 def get_layout_checks(wildcards):
-    """Input function: the FEA checks of the chain's best layouts of one patient."""
-    n = config["layout"]["confirm_top"]
-    return expand("results/patients/{patient}/layout/top{rank}/fea_check.nc", patient=wildcards.patient, rank=range(n))
+    """Input function: the FEA checks of the chain's best layouts of one patient, and of the length rule's layout
+    with its plan (layout.check_default)."""
+    lay, base = config["layout"], f"results/patients/{wildcards.patient}/layout"
+    out = {"checks": [f"{base}/top{k}/fea_check.nc" for k in range(lay["confirm_top"])]}
+    if lay["check_default"]:
+        out |= {"default_plan": f"{base}/default/cascade_plan.nc", "default_check": f"{base}/default/fea_check.nc"}
+    return out

@@ -1,7 +1,8 @@
 # Stage layout design (beyond the paper): the units per group that make the most exercises reachable at the least
 # pressure. Every layout within config layout.bounds is planned on the reduced-order chain (calibrated to the FEA
 # by rule chain_calibration when layout.calibrated), the best layout.confirm_top are planned again and checked by the
-# 2D FEA (the default run's rules on that layout), and the one the FEA finds best is chosen. Not in the default run:
+# 2D FEA (the default run's rules on that layout), beside the length rule's layout (layout.check_default), and the
+# one the FEA finds best is chosen. Not in the default run:
 #   snakemake -c2 design_layouts        (the patients of layout.patients)
 #   snakemake -c2 layout_<patient>
 # With layout.use, a designed patient's plan uses its chosen layout. Entry points: workflow/layout/entry.py.
@@ -90,10 +91,56 @@ use rule fea_check as layout_check with:
         rank=r"\d+",
 
 
+# the length rule's layout (the plan a patient gets without the layout design) planned on the chain the search ranked
+# on and checked on the same mesh, so the choice can keep it when the FEA finds the chain's best no better
+use rule layout_plan as layout_default_plan with:
+    input:
+        unpack(get_layout_calibration),
+        unit_response=get_unit_response(),
+        response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),
+        ccd="results/doe/ccd.nc",
+        moments="results/musculoskeletal/moments.nc",
+        joint_loads="results/patients/{patient}/joint_loads.nc",
+        code=code_files("scripts.cascade_plan"),
+    output:
+        plan="results/patients/{patient}/layout/default/cascade_plan.nc",
+        plot="results/patients/{patient}/layout/default/cascade_poses.png",
+    log:
+        "logs/layout/layout_plan/{patient}_default.log",
+    benchmark:
+        "results/benchmarks/rules/layout_plan_{patient}_default.tsv"
+    params:
+        patient=get_patient,
+        cascade=config["cascade"],
+        anthropometry=config["anthropometry"],
+        unit_model=config["surrogates"]["unit_model"],
+        pressure_limit=get_pressure_limit(),
+        layout_rank=None,
+        config_slice=get_cascade_slice,
+
+
+use rule layout_check as layout_default_check with:
+    input:
+        unpack(get_fea_surrogates),
+        plan="results/patients/{patient}/layout/default/cascade_plan.nc",
+        ccd="results/doe/ccd.nc",
+        moments="results/musculoskeletal/moments.nc",
+        joint_loads="results/patients/{patient}/joint_loads.nc",
+        code=code_files("scripts.fea_check"),
+    output:
+        nc="results/patients/{patient}/layout/default/fea_check.nc",
+        vtu=expand("results/patients/{{patient}}/layout/default/fea_check_{exercise}.vtu", exercise=get_fea_exercises()),
+        plot="results/patients/{patient}/layout/default/fea_check.png",
+    log:
+        "logs/layout/layout_check/{patient}_default.log",
+    benchmark:
+        "results/benchmarks/rules/layout_check_{patient}_default.tsv"
+
+
 rule layout_choice:
     input:
+        unpack(get_layout_checks),
         search="results/patients/{patient}/layout/search.nc",
-        checks=get_layout_checks,
         code=code_files("scripts.layout_choice"),
     output:
         nc="results/patients/{patient}/layout.nc",
@@ -110,7 +157,7 @@ rule layout_choice:
     conda:
         "../envs/project.yaml"
     params:
-        config_slice=lambda wildcards: {"confirm_top": config["layout"]["confirm_top"]},
+        config_slice=lambda wildcards: {k: config["layout"][k] for k in ("confirm_top", "check_default")},
     script:
         "../workflow/scripts/layout_choice.py"
 

@@ -9,7 +9,8 @@ import xarray as xr
 
 from workflow import settings
 from workflow.common.constants import GROUPS
-from workflow.layout.entry import write_layout_choice
+from workflow.layout.choice import CheckedLayout, choose_layout
+from workflow.layout.entry_choice import write_layout_choice
 from workflow.layout.search import LayoutOutcome, candidate_layouts, overhang_mm, rank_outcomes, search_layouts
 from workflow.layout.units import chosen_units, top_units
 
@@ -115,6 +116,82 @@ def test_the_choice_follows_the_fea_not_the_chain(tmp_path):
     with pytest.raises(ValueError, match="none of rank 3"):
         top_units(_search(), 3)
     assert (tmp_path / "l.png").stat().st_size > 0
+
+
+def _default_plan(units, achieved, pressure_kpa):
+    return xr.Dataset(
+        {
+            "units_per_group": ("group", np.array(units, dtype="i4")),
+            "achieved": ("exercise", np.array(achieved)),
+            "pressure_kpa": (("exercise", "group", "chamber"), np.full((2, 4, 2), float(pressure_kpa))),
+        },
+        coords={"exercise": ["TGE1", "TGE2"], "group": list(GROUPS), "chamber": ["top", "bottom"]},
+    )
+
+
+def _choice_with_default(tmp_path, default_units, default_fea, default_kpa, top_fea=([False, False],) * 3):
+    search = tmp_path / "search.nc"
+    _search().to_netcdf(search)
+    checks = []
+    for k, r in enumerate(top_fea):
+        checks.append(tmp_path / f"c{k}.nc")
+        _check(list(r)).to_netcdf(checks[-1])
+    _default_plan(default_units, [True, False], default_kpa).to_netcdf(tmp_path / "dp.nc")
+    _check(default_fea).to_netcdf(tmp_path / "dc.nc")
+    return write_layout_choice(
+        search,
+        checks,
+        out_nc=tmp_path / "layout.nc",
+        out_png=tmp_path / "l.png",
+        config_slice={},
+        default_plan_nc=tmp_path / "dp.nc",
+        default_check_nc=tmp_path / "dc.nc",
+    )
+
+
+def test_the_default_layout_competes_on_the_fea_check(tmp_path):
+    # the chain's best three reach nothing in the FEA; the length rule's 5/6/4/4 (candidate 1, rank 2) reaches TGE1:
+    # kept, although the chain ranks it last of the three and plans it at a higher pressure
+    ds = _choice_with_default(tmp_path, (5, 6, 4, 4), [True, False], 180.0)
+    assert chosen_units(ds) == {"CMC": 5, "MCP": 6, "PIP": 4, "DIP": 4}
+    assert ds.attrs["chosen"] == "default" and ds["checked_label"].values.tolist()[-1] == "default"
+    assert ds["checked_chain_rank"].values.tolist() == [0, 1, 2, 2]
+    assert ds["checked_mean_pressure_kpa"].values[-1] == pytest.approx(180.0)
+    # a default outside the candidates takes the last chain rank; when it reaches as many as a cheaper checked
+    # layout, that one wins and the reason names the default's outcome
+    ds = _choice_with_default(
+        tmp_path, (8, 8, 6, 6), [True, False], 170.0, top_fea=([False, False], [True, False], [False, False])
+    )
+    assert ds["checked_chain_rank"].values[-1] == 3
+    assert chosen_units(ds) == {"CMC": 6, "MCP": 7, "PIP": 5, "DIP": 5}  # rank 1 at 150 kPa beats 170 kPa
+    assert "the default 8/8/6/6 (the plan without the layout design) reaches 1 at 170.0 kPa" in ds.attrs["why"]
+    # the same outcome at a lower pressure than every checked layout: the default wins the tie-break on pressure
+    ds = _choice_with_default(
+        tmp_path, (8, 8, 6, 6), [True, False], 100.0, top_fea=([False, False], [True, False], [False, False])
+    )
+    assert ds.attrs["chosen"] == "default"
+    with pytest.raises(ValueError, match="needs both its plan and its FEA check"):
+        write_layout_choice(
+            tmp_path / "search.nc",
+            [],
+            out_nc=tmp_path / "x.nc",
+            out_png=tmp_path / "x.png",
+            config_slice={},
+            default_plan_nc=tmp_path / "dp.nc",
+        )
+
+
+def test_choose_layout_orders_fea_then_pressure_then_chain_rank():
+    def row(label, n_fea, kpa, rank):
+        fea = np.arange(3) < n_fea
+        return CheckedLayout(label, (4, 5, 3, 3), fea, fea, kpa, rank)
+
+    rows = [row("rank 0", 1, 150.0, 0), row("rank 1", 2, 190.0, 1), row("rank 2", 2, 170.0, 2)]
+    assert choose_layout(rows) == 2  # two exercises, the cheaper
+    rows.append(row("default", 2, 170.0, 1))
+    assert choose_layout(rows) == 3  # same FEA and pressure: the better chain rank
+    with pytest.raises(ValueError, match="no FEA-checked layout"):
+        choose_layout([])
 
 
 def test_layout_config_errors_name_the_key(config):

@@ -51,11 +51,13 @@ def test_dry_run_of_the_studies_outside_the_default_run(tmp_path):
     assert "fea_check" not in jobs and "stability_maps" not in jobs  # the default run's own checks are not needed
     proc = _run(tmp_path, "-n", "--configfile", "config/config.yaml", "config/authors_2d.yaml", str(local))
     assert "cascade_plan" in _planned_jobs(proc)
-    # the layout design: one search per patient, the best few planned and checked by FEA
+    # the layout design: one search per patient, the best few planned and checked by FEA, and the default
     lay = yaml.safe_load((tmp_path / "config" / "config.yaml").read_text())["layout"]
     jobs = _planned_jobs(_run(tmp_path, "-n", "--configfile", "config/config.yaml", str(local), "--", "design_layouts"))
     n = len(lay["patients"])
     assert jobs["layout_search"] == n and jobs["layout_check"] == jobs["layout_plan"] == n * lay["confirm_top"]
+    # the length rule's layout planned and checked beside them (layout.check_default)
+    assert lay["check_default"] and jobs["layout_default_plan"] == jobs["layout_default_check"] == n
     # plans that use the chosen layouts: no cycle through the check's mesh study
     use = tmp_path / "config" / "use_layout.yaml"
     use.write_text(yaml.safe_dump({"layout": {"use": True}, "cascade": {"calibration": {"use": True}}}))

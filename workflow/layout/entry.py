@@ -1,11 +1,12 @@
-"""Entry points of the layout design: the search on the chain, the plan of one of its best candidates, and the choice
-among those the FEA checked. Angles deg, pressures kPa, lengths mm, masses g."""
+"""Entry point of the layout search: every layout within the bounds planned on the chain and ranked (the choice among
+those the FEA checked is :mod:`workflow.layout.entry_choice`, apart so that editing it or the figure does not rerun
+the search). Angles deg, pressures kPa, lengths mm, masses g."""
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +19,9 @@ from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit
 from workflow.cascade.planning import plan_exercise
 from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
-from workflow.layout.plots import plot_layouts
 from workflow.layout.search import LayoutOutcome, candidate_layouts, overhang_mm, search_layouts
-from workflow.layout.units import rank_index
 
-__all__ = ["write_layout_choice", "write_layout_search"]
+__all__ = ["write_layout_search"]
 
 log = logging.getLogger(__name__)
 
@@ -161,79 +160,4 @@ def write_layout_search(
         base.n_per_group,
     )
     write_dataset(ds, out_nc, rule=rule, config_slice=config_slice, title="Layouts searched on the reduced-order chain")
-    return ds
-
-
-def write_layout_choice(
-    search_nc: str | Path,
-    check_ncs: Sequence[str | Path],
-    *,
-    out_nc: str | Path,
-    out_png: str | Path,
-    config_slice: Any,
-    rule: str = "layout_choice",
-) -> xr.Dataset:
-    """Choose among the chain's best layouts by their FEA checks (``check_ncs``, rank 0, 1, ...): the most exercises
-    the FEA reaches, then the least mean planned pressure, then the better chain rank."""
-    search = open_result(search_nc)
-    checks = [open_result(p) for p in check_ncs]
-    ex = [str(e) for e in search["exercise"].values]
-    rows = []
-    for k, chk in enumerate(checks):
-        reached = chk["achieved_corrected"] if "achieved_corrected" in chk else chk["achieved"]
-        fea = np.array([bool(reached.sel(exercise=e)) if e in chk["exercise"].values else False for e in ex])
-        rows.append((k, rank_index(search, k), fea))
-    # the most exercises the FEA reaches, then the least mean planned pressure, then the better chain rank
-    k_w, i_w, fea_w = min(rows, key=lambda r: (-int(r[2].sum()), float(search["mean_pressure_kpa"].values[r[1]]), r[0]))
-    why = (
-        f"rank {k_w} on the chain; the FEA reaches {int(fea_w.sum())} of {len(ex)} "
-        f"({', '.join(e for e, r in zip(ex, fea_w) if r) or 'none'}); the most of the {len(rows)} checked, "
-        f"then the least mean planned pressure ({float(search['mean_pressure_kpa'].values[i_w]):.1f} kPa)"
-    )
-    ds = xr.Dataset(
-        {
-            "checked_units": (
-                ("checked", "group"),
-                np.array([search["units"].values[i] for _, i, _ in rows], dtype="i4"),
-            ),
-            "chain_reached": (("checked", "exercise"), np.array([search["reached"].values[i] for _, i, _ in rows])),
-            "fea_reached": (("checked", "exercise"), np.array([fea for *_, fea in rows])),
-            "fea_angle_deg": (
-                ("checked", "exercise", "joint"),
-                np.array(
-                    [
-                        (chk["corrected_angle_deg"] if "corrected_angle_deg" in chk else chk["angle_deg"])
-                        .reindex(exercise=ex)
-                        .sel(joint=list(JOINTS))
-                        .values
-                        for chk in checks
-                    ]
-                ),
-                {"units": "degree"},
-            ),
-            "checked_mean_pressure_kpa": (
-                "checked",
-                np.array([float(search["mean_pressure_kpa"].values[i]) for _, i, _ in rows]),
-                {"units": "kPa"},
-            ),
-            "chosen_units": ("group", np.array(search["units"].values[i_w], dtype="i4")),
-        },
-        coords={
-            "checked": np.arange(len(rows)),
-            "group": search["group"].values,
-            "exercise": ex,
-            "joint": list(JOINTS),
-        },
-    )
-    kept = search.drop_vars(["pressure_kpa", "pressure"], errors="ignore")
-    ds = ds.merge(kept.rename({k: f"search_{k}" for k in kept.data_vars}))
-    ds.attrs.update({"patient": search.attrs.get("patient", ""), "chain": search.attrs.get("chain", ""), "why": why})
-    log.info(
-        "patient %s: chosen layout %s: %s",
-        ds.attrs["patient"],
-        dict(zip(GROUPS, ds["chosen_units"].values.tolist())),
-        why,
-    )
-    write_dataset(ds, out_nc, rule=rule, config_slice=config_slice, title="The layout chosen by the FEA check")
-    plot_layouts(ds, out_png)
     return ds

@@ -1,5 +1,5 @@
 """The layout design's figure: every candidate on the chain (exercises reached against mean pressure) and the FEA's
-verdict on the best few."""
+verdict on the best few and on the length rule's default."""
 
 from __future__ import annotations
 
@@ -31,15 +31,19 @@ def plot_layouts(ds: xr.Dataset, out: str | Path) -> None:
     ax.set_xlabel("mean planned pressure (kPa)")
     ax.set_ylabel("exercises reached on the chain")
     ax.set_title("candidates on the chain", fontsize=9)
-    labels = ["/".join(str(v) for v in u) for u in ds["checked_units"].values]
+    how = ds["checked_label"].values if "checked_label" in ds else [f"rank {k}" for k in ds["checked"].values]
+    chosen = ds.attrs.get("chosen", "")
+    labels = [
+        f"{'/'.join(str(v) for v in u)} ({h}){', chosen' if h == chosen else ''}"
+        for u, h in zip(ds["checked_units"].values, how)
+    ]
     y = np.arange(len(labels))
     bx.barh(y - 0.2, ds["chain_reached"].sum("exercise").values, height=0.4, label="chain")
     bx.barh(y + 0.2, ds["fea_reached"].sum("exercise").values, height=0.4, label="FEA")
-    chosen = "/".join(str(v) for v in ds["chosen_units"].values)
-    bx.set_yticks(y, [f"{lab}{' (chosen)' if lab == chosen else ''}" for lab in labels])
+    bx.set_yticks(y, labels)
     bx.invert_yaxis()
     bx.set_xlabel("exercises reached")
-    bx.set_title("best layouts on the chain (CMC/MCP/PIP/DIP), checked by FEA", fontsize=9)
+    bx.set_title("the chain's best layouts and the default (CMC/MCP/PIP/DIP), checked by FEA", fontsize=9)
     bx.legend(fontsize=8)
     fig.suptitle(f"Layout design, patient {ds.attrs.get('patient', '')}", fontsize=10)
     fig.tight_layout()

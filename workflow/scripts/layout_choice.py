@@ -1,4 +1,4 @@
-from workflow.layout.entry import write_layout_choice
+from workflow.layout.entry_choice import write_layout_choice
 from workflow.scripts._common import setup_logging
 
 setup_logging(snakemake)  # noqa: F821
@@ -9,5 +9,7 @@ write_layout_choice(
     out_nc=snakemake.output.nc,  # noqa: F821
     out_png=snakemake.output.plot,  # noqa: F821
     config_slice=snakemake.params.config_slice,  # noqa: F821
+    default_plan_nc=i.get("default_plan"),
+    default_check_nc=i.get("default_check"),
     rule=snakemake.rule,  # noqa: F821
 )
