@@ -117,7 +117,7 @@ use rule fea_check as authors_check with:
         "results/benchmarks/rules/authors_check_{variant}_{patient}.tsv"
     params:
         patient=get_patient,
-        fea_check=authors_section("fea_check"),
+        fea_check=lambda wildcards: check_keys(authors_config(wildcards.variant)["fea_check"]),
         actuator=authors_section("actuator"),
         cascade=authors_section("cascade"),
         anthropometry=authors_section("anthropometry"),

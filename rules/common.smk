@@ -259,7 +259,7 @@ def get_calibration_slice(wildcards):
         "cascade": calibration_cascade_cfg(),
         "unit_model": config["surrogates"]["unit_model"],
         "actuator": config["actuator"],
-        "fea_check": config["fea_check"],
+        "fea_check": fea_check_cfg(),
     }
 
 
@@ -270,9 +270,25 @@ def get_chain_calibration(wildcards):
     return {}
 
 
+def check_keys(fea_check):
+    """A fea_check section as an FEA check reads it: not which patients the default run checks, nor the stand-alone
+    actuator's settings (rule standalone_exercise's), so that editing those reruns no check."""
+    return {k: v for k, v in fea_check.items() if k not in ("patients", "standalone")}
+
+
+def fea_check_cfg():
+    """The config's fea_check section as an FEA check reads it (see check_keys)."""
+    return check_keys(config["fea_check"])
+
+
 def get_fea_check_slice(wildcards):
     """Param function: the config one patient's FEA check depends on."""
-    return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": config["fea_check"]}
+    return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": fea_check_cfg()}
+
+
+def get_standalone_slice(wildcards):
+    """Param function: the config one stand-alone exercise depends on (the check's and the stand-alone settings)."""
+    return get_fea_check_slice(wildcards) | {"fea_check": config["fea_check"]}
 
 
 def get_fea_check_rule_slice(wildcards):
@@ -467,7 +483,7 @@ def get_authors_slice(kind):
             "pressure_limit": {k: c["actuator"]["material"][k] for k in ("p_limit_kpa", "p_limit_source")},
         }
         if kind == "check":
-            out |= {"actuator": c["actuator"], "fea_check": c["fea_check"]}
+            out |= {"actuator": c["actuator"], "fea_check": check_keys(c["fea_check"])}
         return out
 
     return get

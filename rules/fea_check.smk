@@ -36,7 +36,7 @@ rule fea_check:
         "../envs/project.yaml"
     params:
         patient=get_patient,
-        fea_check=config["fea_check"],
+        fea_check=fea_check_cfg(),
         actuator=config["actuator"],
         cascade=config["cascade"],
         anthropometry=config["anthropometry"],
@@ -64,7 +64,7 @@ rule standalone_exercise:
         fea_check=config["fea_check"],
         actuator=config["actuator"],
         cascade=config["cascade"],
-        config_slice=get_fea_check_slice,
+        config_slice=get_standalone_slice,
     script:
         "../workflow/scripts/standalone_exercise.py"
 
@@ -120,7 +120,7 @@ rule chain_calibration:
         patient_name=get_calibration_patient(),
         patient=config["patients"][get_calibration_patient()],
         calibration=calibration_cascade_cfg()["calibration"],
-        fea_check=config["fea_check"],
+        fea_check=fea_check_cfg(),
         actuator=config["actuator"],
         cascade=calibration_cascade_cfg(),
         anthropometry=config["anthropometry"],

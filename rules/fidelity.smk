@@ -99,7 +99,7 @@ rule fidelity_check:
     params:
         patient=get_patient,
         check=config["fidelity"]["check"],
-        fea_check=config["fea_check"],
+        fea_check=fea_check_cfg(),
         actuator=config["actuator"],
         cascade=config["cascade"],
         anthropometry=config["anthropometry"],

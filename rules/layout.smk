@@ -1,11 +1,12 @@
 # Stage layout design (beyond the paper): the units per group that make the most exercises reachable at the least
 # pressure. Every layout within config layout.bounds is planned on the reduced-order chain (calibrated to the FEA
 # by rule chain_calibration when layout.calibrated), the best layout.confirm_top are planned again and checked by the
-# 2D FEA (the default run's rules on that layout), beside the length rule's layout (layout.check_default), and the
-# one the FEA finds best is chosen. Not in the default run:
+# 2D FEA (the default run's rules on that layout), beside the default layout (layout.check_default: the plan's units
+# without this stage), and the one the FEA finds best is chosen. Not in the default run:
 #   snakemake -c2 design_layouts        (the patients of layout.patients)
 #   snakemake -c2 layout_<patient>
-# With layout.use, a designed patient's plan uses its chosen layout. Entry points: workflow/layout/entry.py.
+# With layout.use, a designed patient's plan uses its chosen layout. Entry points: workflow/layout/entry.py (search),
+# workflow/layout/entry_choice.py (choice).
 
 
 rule layout_search:
@@ -91,7 +92,7 @@ use rule fea_check as layout_check with:
         rank=r"\d+",
 
 
-# the length rule's layout (the plan a patient gets without the layout design) planned on the chain the search ranked
+# the default layout (cascade.units_per_group, else the length rule: the plan a patient gets without the layout design) planned on the chain the search ranked
 # on and checked on the same mesh, so the choice can keep it when the FEA finds the chain's best no better
 use rule layout_plan as layout_default_plan with:
     input:

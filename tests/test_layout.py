@@ -169,7 +169,7 @@ def test_the_default_layout_competes_on_the_fea_check(tmp_path):
     ds = _choice_with_default(
         tmp_path, (8, 8, 6, 6), [True, False], 100.0, top_fea=([False, False], [True, False], [False, False])
     )
-    assert ds.attrs["chosen"] == "default"
+    assert ds.attrs["chosen"] == "default" and "the default layout, outside the searched bounds" in ds.attrs["why"]
     with pytest.raises(ValueError, match="needs both its plan and its FEA check"):
         write_layout_choice(
             tmp_path / "search.nc",

@@ -151,6 +151,17 @@ def test_editing_one_patient_reruns_only_that_patient(smoke):
     assert "output: results/patients/mean/" not in proc.stdout
 
 
+def test_editing_the_standalone_settings_reruns_no_fea_check(smoke):
+    """The FEA checks read the fea_check section without the stand-alone actuator's settings: adding a model there
+    reruns the stand-alone jobs only."""
+    workdir, cfgs = smoke
+    edited = workdir / "config" / "standalone.yaml"
+    edited.write_text(yaml.safe_dump({"fea_check": {"standalone": {"models": ["2d_mapped", "2d_plan"]}}}))
+    jobs = _planned_jobs(_run(workdir, "-n", *cfgs, str(edited)))
+    assert jobs.get("standalone_exercise") == 1 and jobs.get("standalone_actuator") == 1
+    assert set(jobs) - {"all"} <= {"standalone_exercise", "standalone_actuator"}
+
+
 @pytest.mark.slow
 def test_a_killed_run_reruns_exactly_the_killed_jobs_and_matches_a_clean_run(tmp_path):
     """kill -9 of a real `snakemake` (and its job) mid-job, on the two 2D sweep shards of the smoke config.

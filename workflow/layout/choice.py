@@ -46,13 +46,24 @@ def choose_layout(checked: Sequence[CheckedLayout]) -> int:
     return min(range(len(checked)), key=lambda i: checked[i].key())
 
 
-def why_chosen(checked: Sequence[CheckedLayout], winner: int, exercises: Sequence[str]) -> str:
-    """One sentence saying why ``checked[winner]`` won, naming the default's outcome when it lost."""
+def _how(c: CheckedLayout, n_candidates: int | None) -> str:
+    if c.label != "default":
+        return f"{c.label} on the chain"
+    if n_candidates is not None and c.chain_rank >= n_candidates:
+        return "the default layout, outside the searched bounds"
+    return f"the default layout, rank {c.chain_rank} on the chain"
+
+
+def why_chosen(
+    checked: Sequence[CheckedLayout], winner: int, exercises: Sequence[str], n_candidates: int | None = None
+) -> str:
+    """One sentence saying why ``checked[winner]`` won, naming the default's outcome when it lost (``n_candidates``:
+    how many layouts the search ranked, to tell a default outside them)."""
     w = checked[winner]
     reached = [e for e, r in zip(exercises, w.fea_reached) if r]
     units = "/".join(str(v) for v in w.units)
     text = (
-        f"{units} ({w.label} on the chain); the FEA reaches {len(reached)} of {len(exercises)} "
+        f"{units} ({_how(w, n_candidates)}); the FEA reaches {len(reached)} of {len(exercises)} "
         f"({', '.join(reached) or 'none'}); the most of the {len(checked)} checked, then the least mean planned "
         f"pressure ({w.mean_pressure_kpa:.1f} kPa)"
     )

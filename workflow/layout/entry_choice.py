@@ -80,7 +80,7 @@ def write_layout_choice(
         )
         angles.append(ang)
     w = choose_layout(rows)
-    why = why_chosen(rows, w, ex)
+    why = why_chosen(rows, w, ex, int(search.sizes["candidate"]))
     ds = xr.Dataset(
         {
             "checked_label": ("checked", np.array([r.label for r in rows]), {"long_name": "why it was checked"}),
