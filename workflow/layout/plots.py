@@ -43,7 +43,7 @@ def plot_layouts(ds: xr.Dataset, out: str | Path) -> None:
     bx.set_yticks(y, labels)
     bx.invert_yaxis()
     bx.set_xlabel("exercises reached")
-    bx.set_title("the chain's best layouts and the default (CMC/MCP/PIP/DIP), checked by FEA", fontsize=9)
+    bx.set_title("checked by FEA: the chain's best and the default\n(units CMC/MCP/PIP/DIP)", fontsize=9)
     bx.legend(fontsize=8)
     fig.suptitle(f"Layout design, patient {ds.attrs.get('patient', '')}", fontsize=10)
     fig.tight_layout()
