@@ -60,7 +60,9 @@ def test_dry_run_of_the_studies_outside_the_default_run(tmp_path):
     assert lay["check_default"] and jobs["layout_default_plan"] == jobs["layout_default_check"] == n
     # plans that use the chosen layouts: no cycle through the check's mesh study
     use = tmp_path / "config" / "use_layout.yaml"
-    use.write_text(yaml.safe_dump({"layout": {"use": True}, "cascade": {"calibration": {"use": True}}}))
+    use.write_text(
+        yaml.safe_dump({"layout": {"use": True, "calibrated": True}, "cascade": {"calibration": {"use": True}}})
+    )
     jobs = _planned_jobs(_run(tmp_path, "-n", "--configfile", "config/config.yaml", str(local), str(use)))
     assert jobs["layout_choice"] == n and jobs["cascade_plan"] >= n
 
