@@ -16,6 +16,7 @@ from workflow.authors_study.summary import study_dataset
 from workflow.cascade import finger as F
 from workflow.cascade import model as C
 from workflow.cascade.patient import linear_springs
+from workflow.fea_check.outcome import final_outcome
 
 
 def _leaves(d, prefix=""):
@@ -164,3 +165,15 @@ def test_the_study_table_reads_the_corrected_outcome():
     assert float(ds["max_strap_force_n"].sel(variant="gravity", exercise="TGE2")) == 6.0
     assert float(ds["moment_share_of_limit"].sel(variant="gravity", exercise="TGE1")) == pytest.approx(0.04)
     assert ds["changes"].sel(variant="gravity").item() == "cascade.gravity_m_s2"
+
+
+def test_the_final_outcome_is_the_first_solve_where_no_correction_ran():
+    full = _check([True, False], [False, True], 1.0)
+    corrected = final_outcome(full)
+    assert corrected.attrs["corrected"] == 1
+    assert corrected["reached"].values.tolist() == [False, True]
+    assert corrected["angle_deg"].sel(exercise="TGE1").values.tolist() == [4.0, 0.0, 4.0]
+    first = final_outcome(full.drop_vars(["corrected_angle_deg", "achieved_corrected"]))
+    assert first.attrs["corrected"] == 0
+    assert first["reached"].values.tolist() == [True, False]
+    assert first["angle_deg"].sel(exercise="TGE1").values.tolist() == [9.0, 1.0, 4.0]

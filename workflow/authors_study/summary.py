@@ -13,22 +13,22 @@ import numpy as np
 import xarray as xr
 
 from workflow.common.constants import JOINTS
+from workflow.fea_check.outcome import final_outcome
 
 __all__ = ["final_state", "study_dataset"]
 
 
 def final_state(check: xr.Dataset) -> xr.Dataset:
-    """One check's outcome per exercise: the best corrected state where the correction ran, else the first solve."""
-    corrected = "corrected_angle_deg" in check
-    angle = check["corrected_angle_deg"] if corrected else check["angle_deg"]
-    reached = check["achieved_corrected"] if corrected else check["achieved"]
+    """One check's outcome per exercise: the best corrected state where the correction ran, else the first solve
+    (:func:`workflow.fea_check.outcome.final_outcome`), with its loads against the safety limits."""
+    final = final_outcome(check)
     limit = check["active_limit_nm"].sel(joint=list(JOINTS))
     moment = check["max_actuator_moment_nm"].sel(joint=list(JOINTS))
     return xr.Dataset(
         {
-            "angle_deg": angle.sel(joint=list(JOINTS)).astype(float),
+            "angle_deg": final["angle_deg"],
             "target_angle_deg": check["target_angle_deg"].sel(joint=list(JOINTS)).astype(float),
-            "reached": reached.astype(bool),
+            "reached": final["reached"],
             "converged": check["converged"].astype(bool),
             "load_factor": check["load_factor"].astype(float),
             "max_strap_force_n": check["max_strap_force_n"].max("strap").astype(float),

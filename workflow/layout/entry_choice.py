@@ -13,6 +13,7 @@ import xarray as xr
 
 from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
+from workflow.fea_check.outcome import final_outcome
 from workflow.layout.choice import CheckedLayout, choose_layout, why_chosen
 from workflow.layout.plots import plot_layouts
 from workflow.layout.units import rank_index
@@ -23,11 +24,10 @@ log = logging.getLogger(__name__)
 
 
 def _fea_outcome(chk: xr.Dataset, ex: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Per exercise reached by an FEA check (after its correction step, where it ran) and the joint angles (deg)."""
-    reached = chk["achieved_corrected"] if "achieved_corrected" in chk else chk["achieved"]
-    fea = np.array([bool(reached.sel(exercise=e)) if e in chk["exercise"].values else False for e in ex])
-    angles = chk["corrected_angle_deg"] if "corrected_angle_deg" in chk else chk["angle_deg"]
-    return fea, angles.reindex(exercise=list(ex)).sel(joint=list(JOINTS)).values
+    """Per exercise of ``ex`` reached by an FEA check and the joint angles (deg; NaN and not reached where the check
+    has no such exercise)."""
+    final = final_outcome(chk).reindex(exercise=list(ex))
+    return final["reached"].fillna(False).values.astype(bool), final["angle_deg"].values
 
 
 def write_layout_choice(
