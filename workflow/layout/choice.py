@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workflow.layout.search import ranking_key
+
 __all__ = ["CheckedLayout", "choose_layout", "why_chosen"]
 
 
@@ -34,8 +36,9 @@ class CheckedLayout:
     chain_rank: int
 
     def key(self) -> tuple[int, float, int]:
-        p = self.mean_pressure_kpa if np.isfinite(self.mean_pressure_kpa) else np.inf
-        return (-int(np.sum(self.fea_reached)), round(float(p), 9), int(self.chain_rank))
+        """Sort key (:func:`workflow.layout.search.ranking_key`): the most exercises the FEA reaches, then the least
+        mean planned pressure, then the better chain rank."""
+        return ranking_key(int(np.sum(self.fea_reached)), self.mean_pressure_kpa, self.chain_rank)
 
 
 def choose_layout(checked: Sequence[CheckedLayout]) -> int:

@@ -21,7 +21,14 @@ import numpy as np
 from workflow.cascade.model import actuator_start_mm
 from workflow.common.constants import GROUPS
 
-__all__ = ["LayoutOutcome", "candidate_layouts", "overhang_mm", "rank_outcomes", "search_layouts"]
+__all__ = ["LayoutOutcome", "candidate_layouts", "overhang_mm", "rank_outcomes", "ranking_key", "search_layouts"]
+
+
+def ranking_key(n_reached: int, mean_pressure_kpa: float, tiebreak: int) -> tuple[int, float, int]:
+    """Sort key of the search and of the choice: the most exercises reached, then the least mean pressure (kPa; a
+    non-finite one last, rounded to 1e-9 so that equal plans tie), then the smaller ``tiebreak``."""
+    p = float(mean_pressure_kpa) if np.isfinite(mean_pressure_kpa) else np.inf
+    return (-int(n_reached), round(p, 9), int(tiebreak))
 
 
 @dataclass(frozen=True)
@@ -38,10 +45,10 @@ class LayoutOutcome:
     def n_reached(self) -> int:
         return int(sum(self.reached))
 
-    def key(self) -> tuple[float, float, int]:
-        """Sort key: the most exercises reached, then the least mean pressure, then the fewest units."""
-        p = self.mean_pressure_kpa if np.isfinite(self.mean_pressure_kpa) else np.inf
-        return (-self.n_reached, round(float(p), 9), int(sum(self.layout)))
+    def key(self) -> tuple[int, float, int]:
+        """Sort key (:func:`ranking_key`): the most exercises reached, then the least mean pressure, then the fewest
+        units."""
+        return ranking_key(self.n_reached, self.mean_pressure_kpa, sum(self.layout))
 
 
 def overhang_mm(layout: Sequence[int], *, unit_length_mm: float, tip_mm: float, layout_shift_mm: float = 0.0) -> float:
