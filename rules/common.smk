@@ -242,12 +242,18 @@ def get_calibration_patient():
     return c["calibration"].get("patient") or c["validation_patient"]
 
 
+def cascade_cfg_without(*keys):
+    """The cascade section without ``keys`` and without whether the plans use the chain's calibration (a rule that
+    gets the calibration from its inputs, or runs upstream of it, must not rerun when that switch changes)."""
+    c = {k: v for k, v in config["cascade"].items() if k not in keys}
+    c["calibration"] = {k: v for k, v in c["calibration"].items() if k != "use"}
+    return c
+
+
 def calibration_cascade_cfg():
     """The cascade section as the chain's calibration reads it: without the planner and without whether the plans
     use the calibration, so that switching either does not rerun its FEA."""
-    c = {k: v for k, v in config["cascade"].items() if k not in ("planner", "stiffness_margin")}
-    c["calibration"] = {k: v for k, v in c["calibration"].items() if k != "use"}
-    return c
+    return cascade_cfg_without("planner", "stiffness_margin")
 
 
 def get_calibration_slice(wildcards):
@@ -525,15 +531,40 @@ def layout_search_cfg():
 
 
 def layout_cascade_cfg():
-    """The cascade section as the layout search reads it: the calibration's use is layout.calibrated's business."""
-    c = dict(config["cascade"])
-    c["calibration"] = {k: v for k, v in c["calibration"].items() if k != "use"}
-    return c
+    """The cascade section as the layout search and its plans read it: the calibration's use is
+    layout.calibrated's business."""
+    return cascade_cfg_without()
 
 
 def get_layout_slice(wildcards):
     """Param function: the config the layout search depends on."""
     return get_cascade_slice(wildcards) | {"cascade": layout_cascade_cfg(), "layout": layout_search_cfg()}
+
+
+def get_layout_plan_slice(wildcards):
+    """Param function: the config a layout plan depends on (the default plan's, on the layout search's chain)."""
+    return get_cascade_slice(wildcards) | {"cascade": layout_cascade_cfg()}
+
+
+def layout_plan_inputs(ranked):
+    """Input function of a layout plan: the default plan's inputs on the chain the layout search ranks on, and with
+    ``ranked`` the search, whose rank-k layout the plan takes."""
+
+    def inputs(wildcards):
+        response = get_unit_response()
+        out = get_layout_calibration(wildcards) | {
+            "unit_response": response,
+            "response": response.replace("surrogate_", "response_").replace(".joblib", ".nc"),
+            "ccd": "results/doe/ccd.nc",
+            "moments": "results/musculoskeletal/moments.nc",
+            "joint_loads": f"results/patients/{wildcards.patient}/joint_loads.nc",
+            "code": code_files("scripts.cascade_plan"),
+        }
+        if ranked:
+            out["layout"] = f"results/patients/{wildcards.patient}/layout/search.nc"
+        return out
+
+    return inputs
 
 
 def get_layout_checks(wildcards):

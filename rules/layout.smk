@@ -41,14 +41,7 @@ rule layout_search:
 # read from the search
 use rule cascade_plan as layout_plan with:
     input:
-        unpack(get_layout_calibration),
-        unit_response=get_unit_response(),
-        response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),
-        ccd="results/doe/ccd.nc",
-        moments="results/musculoskeletal/moments.nc",
-        joint_loads="results/patients/{patient}/joint_loads.nc",
-        layout="results/patients/{patient}/layout/search.nc",
-        code=code_files("scripts.cascade_plan"),
+        unpack(layout_plan_inputs(ranked=True)),
     output:
         plan="results/patients/{patient}/layout/top{rank}/cascade_plan.nc",
         plot="results/patients/{patient}/layout/top{rank}/cascade_poses.png",
@@ -60,12 +53,12 @@ use rule cascade_plan as layout_plan with:
         rank=r"\d+",
     params:
         patient=get_patient,
-        cascade=config["cascade"],
+        cascade=layout_cascade_cfg(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         pressure_limit=get_pressure_limit(),
         layout_rank=lambda wildcards: int(wildcards.rank),
-        config_slice=lambda wildcards: get_cascade_slice(wildcards) | {"layout_rank": int(wildcards.rank)},
+        config_slice=lambda wildcards: get_layout_plan_slice(wildcards) | {"layout_rank": int(wildcards.rank)},
 
 
 # the check's mesh is fea_check.h_actuator_mm: the mesh study checks the validation patient's plan, which with
@@ -96,13 +89,7 @@ use rule fea_check as layout_check with:
 # on and checked on the same mesh, so the choice can keep it when the FEA finds the chain's best no better
 use rule layout_plan as layout_default_plan with:
     input:
-        unpack(get_layout_calibration),
-        unit_response=get_unit_response(),
-        response=get_unit_response().replace("surrogate_", "response_").replace(".joblib", ".nc"),
-        ccd="results/doe/ccd.nc",
-        moments="results/musculoskeletal/moments.nc",
-        joint_loads="results/patients/{patient}/joint_loads.nc",
-        code=code_files("scripts.cascade_plan"),
+        unpack(layout_plan_inputs(ranked=False)),
     output:
         plan="results/patients/{patient}/layout/default/cascade_plan.nc",
         plot="results/patients/{patient}/layout/default/cascade_poses.png",
@@ -112,12 +99,12 @@ use rule layout_plan as layout_default_plan with:
         "results/benchmarks/rules/layout_plan_{patient}_default.tsv"
     params:
         patient=get_patient,
-        cascade=config["cascade"],
+        cascade=layout_cascade_cfg(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         pressure_limit=get_pressure_limit(),
         layout_rank=None,
-        config_slice=get_cascade_slice,
+        config_slice=get_layout_plan_slice,
 
 
 use rule layout_check as layout_default_check with:
