@@ -214,3 +214,16 @@ def test_layout_config_errors_name_the_key(config):
     bad["layout"]["bounds"]["CMC"] = [1, 30]
     with pytest.raises(settings.ConfigError, match="layout.bounds: .* candidates, more than max_candidates"):
         settings.check_config(bad)
+    # the overhang past each patient's own fingertip (the sum of its phalanx lengths) is checked before any job
+    bad = copy.deepcopy(config)
+    bad["layout"]["max_overhang_mm"] = -50.0
+    with pytest.raises(settings.ConfigError, match=r"-50 mm past the fingertip .*\(patient mean\)"):
+        settings.check_config(bad)
+    bad["layout"]["max_overhang_mm"] = (
+        0.0  # at most 0 mm past the tip: 50 of the mean finger's 270 layouts (26 mm) remain
+    )
+    bad["layout"]["confirm_top"] = 200
+    with pytest.raises(
+        settings.ConfigError, match="confirm_top = 200: the bounds hold only 50 layouts for patient mean"
+    ):
+        settings.check_config(bad)

@@ -18,6 +18,7 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from workflow.cascade.finger import patient_dimensions_mm
 from workflow.cascade.model import unit_section
 from workflow.doe import ccd as doe
 from workflow.fem.material_stability import drucker_instabilities
@@ -111,17 +112,20 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
     return warnings
 
 
+def _coded_levels(patient: Mapping[str, Any], anthropometry: Mapping[str, Any]) -> dict[str, float]:
+    """A patient's coded levels, given as ``coded`` or computed from ``measurements_mm``."""
+    if "coded" in patient:
+        return {f: float(patient["coded"][f]) for f in doe.FACTORS}
+    return doe.coded_levels(
+        patient["measurements_mm"], anthropometry["measures"], float(anthropometry.get("coded_unit_sd", 1.0))
+    )
+
+
 def _check_coded_levels(name: str, patient: Mapping[str, Any], anthropometry: Mapping[str, Any]) -> list[str]:
     """Error beyond ``anthropometry.coded_bound``; a warning outside the CCD's design region (sphere and box)."""
 
-    if "coded" in patient:
-        x = {f: float(patient["coded"][f]) for f in doe.FACTORS}
-        given = f"patients.{name}.coded"
-    else:
-        x = doe.coded_levels(
-            patient["measurements_mm"], anthropometry["measures"], float(anthropometry.get("coded_unit_sd", 1.0))
-        )
-        given = f"patients.{name}.measurements_mm"
+    x = _coded_levels(patient, anthropometry)
+    given = f"patients.{name}.coded" if "coded" in patient else f"patients.{name}.measurements_mm"
     levels = ", ".join(f"{f} {v:.3g}" for f, v in x.items())
     bound = float(anthropometry.get("coded_bound", 3.0))
     far = [f for f, v in x.items() if not abs(v) <= bound]  # NaN counts as far
@@ -273,18 +277,33 @@ def _check_layout(config: Mapping[str, Any]) -> None:
     sec = unit_section(c["unit_geometry_mm"])
     d = c["densities"]
     mass_g = (d["silicone"] * sec["silicone_mm3"] + d["paper"] * sec["paper_mm3"]) * 1e-6
-    try:
-        n = len(
-            candidate_layouts(
-                lay["bounds"],
-                unit_length_mm=sec["unit_length_mm"],
-                unit_mass_g=mass_g,
-                max_length_mm=float(lay["max_length_mm"]),
-                max_mass_g=float(lay["max_mass_g"]),
-                max_candidates=int(lay["max_candidates"]),
-            )
+    anth = config["anthropometry"]
+    for name in dict.fromkeys(lay["patients"]):
+        # the search job's bound on the overhang needs the fingertip: the sum of the patient's phalanx lengths
+        patient = config["patients"][name]
+        dims = patient_dimensions_mm(
+            anth["measures"],
+            _coded_levels(patient, anth),
+            float(anth.get("coded_unit_sd", 1.0)),
+            patient.get("measurements_mm"),
         )
-    except ValueError as err:
-        raise ConfigError(str(err).replace("layout bounds", "layout.bounds")) from None
-    if int(lay["confirm_top"]) > n:
-        raise ConfigError(f"layout.confirm_top = {lay['confirm_top']}: the bounds hold only {n} layouts")
+        try:
+            n = len(
+                candidate_layouts(
+                    lay["bounds"],
+                    unit_length_mm=sec["unit_length_mm"],
+                    unit_mass_g=mass_g,
+                    max_length_mm=float(lay["max_length_mm"]),
+                    max_mass_g=float(lay["max_mass_g"]),
+                    tip_mm=dims["L3PP"] + dims["L3MP"] + dims["L3DP"],
+                    max_overhang_mm=float(lay["max_overhang_mm"]),
+                    layout_shift_mm=float(c.get("layout_shift_mm", 0.0)),
+                    max_candidates=int(lay["max_candidates"]),
+                )
+            )
+        except ValueError as err:
+            raise ConfigError(f"{str(err).replace('layout bounds', 'layout.bounds')} (patient {name})") from None
+        if int(lay["confirm_top"]) > n:
+            raise ConfigError(
+                f"layout.confirm_top = {lay['confirm_top']}: the bounds hold only {n} layouts for patient {name}"
+            )
