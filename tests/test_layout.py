@@ -219,11 +219,29 @@ def test_layout_config_errors_name_the_key(config):
     bad["layout"]["max_overhang_mm"] = -50.0
     with pytest.raises(settings.ConfigError, match=r"-50 mm past the fingertip .*\(patient mean\)"):
         settings.check_config(bad)
-    bad["layout"]["max_overhang_mm"] = (
-        0.0  # at most 0 mm past the tip: 50 of the mean finger's 270 layouts (26 mm) remain
-    )
+    # at most 0 mm past the tip: 50 of the mean finger's 270 layouts (26 mm) remain
+    bad["layout"]["max_overhang_mm"] = 0.0
     bad["layout"]["confirm_top"] = 200
     with pytest.raises(
         settings.ConfigError, match="confirm_top = 200: the bounds hold only 50 layouts for patient mean"
     ):
         settings.check_config(bad)
+
+
+@pytest.mark.parametrize(
+    "patient",
+    [
+        {"coded": {"depth": 0.0, "length": 0.5, "breadth": 0.5}},
+        {"measurements_mm": {"L3PP": 55.0, "L3MP": 31.0, "D3PP": 18.0}},  # L3DP from the length level
+    ],
+)
+def test_the_config_check_measures_the_overhang_from_the_fingertip_the_finger_model_builds(config, patient):
+    from tests._doubles import linear_springs
+    from workflow.cascade import finger as F
+    from workflow.musculoskeletal.patient_loads import patient_levels
+
+    anth = config["anthropometry"]
+    measures, sd = anth["measures"], float(anth.get("coded_unit_sd", 1.0))
+    dims = F.patient_dimensions_mm(measures, patient_levels(patient, measures, sd), sd, patient.get("measurements_mm"))
+    fing = F.build_finger(dims, linear_springs(), config["cascade"]["densities"])
+    assert settings._fingertip_mm(patient, anth) == pytest.approx(fing.tip_x_m * 1e3, abs=1e-9)

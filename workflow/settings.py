@@ -23,6 +23,7 @@ from workflow.cascade.model import unit_section
 from workflow.doe import ccd as doe
 from workflow.fem.material_stability import drucker_instabilities
 from workflow.layout.search import candidate_layouts
+from workflow.musculoskeletal.patient_loads import patient_levels
 
 __all__ = ["ConfigError", "check_config", "checked_patients", "load_config", "REPO_ROOT", "SCHEMA_PATH"]
 
@@ -112,19 +113,18 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
     return warnings
 
 
-def _coded_levels(patient: Mapping[str, Any], anthropometry: Mapping[str, Any]) -> dict[str, float]:
-    """A patient's coded levels, given as ``coded`` or computed from ``measurements_mm``."""
-    if "coded" in patient:
-        return {f: float(patient["coded"][f]) for f in doe.FACTORS}
-    return doe.coded_levels(
-        patient["measurements_mm"], anthropometry["measures"], float(anthropometry.get("coded_unit_sd", 1.0))
-    )
+def _fingertip_mm(patient: Mapping[str, Any], anthropometry: Mapping[str, Any]) -> float:
+    """The fingertip's distance from the MCP joint on the straight finger, mm: the sum of the patient's phalanx
+    lengths, as :func:`workflow.cascade.finger.build_finger` places it (``tip_x_m``)."""
+    measures, sd = anthropometry["measures"], float(anthropometry.get("coded_unit_sd", 1.0))
+    dims = patient_dimensions_mm(measures, patient_levels(patient, measures, sd), sd, patient.get("measurements_mm"))
+    return dims["L3PP"] + dims["L3MP"] + dims["L3DP"]
 
 
 def _check_coded_levels(name: str, patient: Mapping[str, Any], anthropometry: Mapping[str, Any]) -> list[str]:
     """Error beyond ``anthropometry.coded_bound``; a warning outside the CCD's design region (sphere and box)."""
 
-    x = _coded_levels(patient, anthropometry)
+    x = patient_levels(patient, anthropometry["measures"], float(anthropometry.get("coded_unit_sd", 1.0)))
     given = f"patients.{name}.coded" if "coded" in patient else f"patients.{name}.measurements_mm"
     levels = ", ".join(f"{f} {v:.3g}" for f, v in x.items())
     bound = float(anthropometry.get("coded_bound", 3.0))
@@ -277,16 +277,9 @@ def _check_layout(config: Mapping[str, Any]) -> None:
     sec = unit_section(c["unit_geometry_mm"])
     d = c["densities"]
     mass_g = (d["silicone"] * sec["silicone_mm3"] + d["paper"] * sec["paper_mm3"]) * 1e-6
-    anth = config["anthropometry"]
     for name in dict.fromkeys(lay["patients"]):
-        # the search job's bound on the overhang needs the fingertip: the sum of the patient's phalanx lengths
-        patient = config["patients"][name]
-        dims = patient_dimensions_mm(
-            anth["measures"],
-            _coded_levels(patient, anth),
-            float(anth.get("coded_unit_sd", 1.0)),
-            patient.get("measurements_mm"),
-        )
+        # the search job's overhang bound is measured from the patient's own fingertip
+        tip_mm = _fingertip_mm(config["patients"][name], config["anthropometry"])
         try:
             n = len(
                 candidate_layouts(
@@ -295,7 +288,7 @@ def _check_layout(config: Mapping[str, Any]) -> None:
                     unit_mass_g=mass_g,
                     max_length_mm=float(lay["max_length_mm"]),
                     max_mass_g=float(lay["max_mass_g"]),
-                    tip_mm=dims["L3PP"] + dims["L3MP"] + dims["L3DP"],
+                    tip_mm=tip_mm,
                     max_overhang_mm=float(lay["max_overhang_mm"]),
                     layout_shift_mm=float(c.get("layout_shift_mm", 0.0)),
                     max_candidates=int(lay["max_candidates"]),

@@ -21,8 +21,7 @@ def final_outcome(check: xr.Dataset) -> xr.Dataset:
     corrected = "corrected_angle_deg" in check
     angle = check["corrected_angle_deg"] if corrected else check["angle_deg"]
     reached = check["achieved_corrected"] if corrected else check["achieved"]
-    out = xr.Dataset(
+    return xr.Dataset(
         {"angle_deg": angle.sel(joint=list(JOINTS)).astype(float), "reached": reached.astype(bool)},
         attrs={"corrected": int(corrected)},
     )
-    return out
