@@ -536,14 +536,23 @@ def layout_cascade_cfg():
     return cascade_cfg_without()
 
 
-def get_layout_slice(wildcards):
-    """Param function: the config the layout search depends on."""
-    return get_cascade_slice(wildcards) | {"cascade": layout_cascade_cfg(), "layout": layout_search_cfg()}
+def get_layout_rank(wildcards):
+    """Param function: the search rank whose layout a layout plan takes (None: the default layout's plan)."""
+    rank = getattr(wildcards, "rank", None)
+    return None if rank is None else int(rank)
 
 
 def get_layout_plan_slice(wildcards):
-    """Param function: the config a layout plan depends on (the default plan's, on the layout search's chain)."""
-    return get_cascade_slice(wildcards) | {"cascade": layout_cascade_cfg()}
+    """Param function: the config a layout plan depends on (the default plan's, on the layout search's chain, and
+    the rank it takes from the search)."""
+    out = get_cascade_slice(wildcards) | {"cascade": layout_cascade_cfg()}
+    rank = get_layout_rank(wildcards)
+    return out if rank is None else out | {"layout_rank": rank}
+
+
+def get_layout_slice(wildcards):
+    """Param function: the config the layout search depends on."""
+    return get_layout_plan_slice(wildcards) | {"layout": layout_search_cfg()}
 
 
 def layout_plan_inputs(ranked):

@@ -57,8 +57,8 @@ use rule cascade_plan as layout_plan with:
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         pressure_limit=get_pressure_limit(),
-        layout_rank=lambda wildcards: int(wildcards.rank),
-        config_slice=lambda wildcards: get_layout_plan_slice(wildcards) | {"layout_rank": int(wildcards.rank)},
+        layout_rank=get_layout_rank,
+        config_slice=get_layout_plan_slice,
 
 
 # the check's mesh is fea_check.h_actuator_mm: the mesh study checks the validation patient's plan, which with
@@ -97,14 +97,6 @@ use rule layout_plan as layout_default_plan with:
         "logs/layout/layout_plan/{patient}_default.log",
     benchmark:
         "results/benchmarks/rules/layout_plan_{patient}_default.tsv"
-    params:
-        patient=get_patient,
-        cascade=layout_cascade_cfg(),
-        anthropometry=config["anthropometry"],
-        unit_model=config["surrogates"]["unit_model"],
-        pressure_limit=get_pressure_limit(),
-        layout_rank=None,
-        config_slice=get_layout_plan_slice,
 
 
 use rule layout_check as layout_default_check with:
