@@ -243,8 +243,9 @@ def get_calibration_patient():
 
 
 def cascade_cfg_without(*keys):
-    """The cascade section without ``keys`` and without whether the plans use the chain's calibration (a rule that
-    gets the calibration from its inputs, or runs upstream of it, must not rerun when that switch changes)."""
+    """The cascade section without ``keys`` and without whether the plans use the chain's calibration: what a rule
+    reads that takes its chain from its inputs (an FEA check from its plan, a layout plan from layout.calibrated) or
+    runs upstream of the calibration, so that switching cascade.calibration.use reruns only the plans it changes."""
     c = {k: v for k, v in config["cascade"].items() if k not in keys}
     c["calibration"] = {k: v for k, v in c["calibration"].items() if k != "use"}
     return c
@@ -289,7 +290,11 @@ def fea_check_cfg():
 
 def get_fea_check_slice(wildcards):
     """Param function: the config one patient's FEA check depends on."""
-    return {**get_cascade_slice(wildcards), "actuator": config["actuator"], "fea_check": fea_check_cfg()}
+    return get_cascade_slice(wildcards) | {
+        "cascade": cascade_cfg_without(),
+        "actuator": config["actuator"],
+        "fea_check": fea_check_cfg(),
+    }
 
 
 def get_standalone_slice(wildcards):
@@ -530,12 +535,6 @@ def layout_search_cfg():
     }
 
 
-def layout_cascade_cfg():
-    """The cascade section as the layout search and its plans read it: the calibration's use is
-    layout.calibrated's business."""
-    return cascade_cfg_without()
-
-
 def get_layout_rank(wildcards):
     """Param function: the search rank whose layout a layout plan takes (None: the default layout's plan)."""
     rank = getattr(wildcards, "rank", None)
@@ -545,7 +544,7 @@ def get_layout_rank(wildcards):
 def get_layout_plan_slice(wildcards):
     """Param function: the config a layout plan depends on (the default plan's, on the layout search's chain, and
     the rank it takes from the search)."""
-    out = get_cascade_slice(wildcards) | {"cascade": layout_cascade_cfg()}
+    out = get_cascade_slice(wildcards) | {"cascade": cascade_cfg_without()}
     rank = get_layout_rank(wildcards)
     return out if rank is None else out | {"layout_rank": rank}
 

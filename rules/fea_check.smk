@@ -38,7 +38,7 @@ rule fea_check:
         patient=get_patient,
         fea_check=fea_check_cfg(),
         actuator=config["actuator"],
-        cascade=config["cascade"],
+        cascade=cascade_cfg_without(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         tolerance_deg=config["fidelity"]["tolerance"]["check_deg"],
@@ -63,7 +63,7 @@ rule standalone_exercise:
     params:
         fea_check=config["fea_check"],
         actuator=config["actuator"],
-        cascade=config["cascade"],
+        cascade=cascade_cfg_without(),
         config_slice=get_standalone_slice,
     script:
         "../workflow/scripts/standalone_exercise.py"

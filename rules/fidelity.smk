@@ -101,7 +101,7 @@ rule fidelity_check:
         check=config["fidelity"]["check"],
         fea_check=fea_check_cfg(),
         actuator=config["actuator"],
-        cascade=config["cascade"],
+        cascade=cascade_cfg_without(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         config_slice=get_check_study_slice,

@@ -27,7 +27,7 @@ rule layout_search:
         "../envs/project.yaml"
     params:
         patient=get_patient,
-        cascade=layout_cascade_cfg(),
+        cascade=cascade_cfg_without(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         layout=layout_search_cfg(),
@@ -53,7 +53,7 @@ use rule cascade_plan as layout_plan with:
         rank=r"\d+",
     params:
         patient=get_patient,
-        cascade=layout_cascade_cfg(),
+        cascade=cascade_cfg_without(),
         anthropometry=config["anthropometry"],
         unit_model=config["surrogates"]["unit_model"],
         pressure_limit=get_pressure_limit(),
