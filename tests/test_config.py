@@ -57,6 +57,8 @@ def test_default_config_is_valid(cfg):
         (lambda c: c["patients"].update({"p/1": {"coded": {"depth": 0, "length": 0, "breadth": 0}}}), "'p/1'"),
         (lambda c: c["fea_check"].update(patients=["mean", "nobody"]), "fea_check.patients: 'nobody'"),
         (lambda c: c["fea_check"].update(patients="some"), "'some'"),
+        (lambda c: c["actuator"]["geometry"].update(fillet=2.5), "actuator.geometry.fillet = 2.5 mm"),
+        (lambda c: c["actuator"]["geometry"].update(fillet=-1.0), "-1.0"),
     ],
 )
 def test_bad_values_are_named(cfg, mutate, needle):

@@ -68,6 +68,14 @@ def check_config(config: Mapping[str, Any]) -> list[str]:
                 raise ConfigError(f"patients.{name}.measurements_mm.{code} = {value}: must be > 0 mm")
         warnings += _check_coded_levels(name, patient, config["anthropometry"])
     _check_pressure_bounds(config)
+    geom = config.get("actuator", {}).get("geometry", {})
+    fillet = float(geom.get("fillet", 0.0))
+    room = min(float(geom.get("ac_th_for", 2.0)), float(geom.get("ac_th_up", 2.0)))
+    if fillet > room:
+        raise ConfigError(
+            f"actuator.geometry.fillet = {fillet:g} mm: larger than the block's wall and roof round the pocket "
+            f"(min(ac_th_for, ac_th_up) = {room:g} mm)"
+        )
     warnings += _check_material(config.get("actuator", {}).get("material", {}))
     cascade = config.get("cascade", {})
     for key in ("validation_patient", "dummy_patient"):

@@ -11,7 +11,10 @@ paper layer (height), z across the width:
   ``ac_th_side`` across the width, from ``ac_th_down`` above the block's base
   (the top of the base layer; Table 6 has no pocket floor, 0) up to
   ``height - ac_th_up``;
-* the bottom side mirrors the top.  Air vents and ``ends_ext`` are left out.
+* the bottom side mirrors the top.  Air vents and ``ends_ext`` are left out;
+* optionally (``fillet`` > 0, not in Table 6) the blocks' outer corners of the
+  x-y section rounded to that radius (`round_corners`, after every node and
+  facet set is chosen on the square geometry).
 
 2D: the longitudinal section through the width's symmetry plane (plane strain,
 bilinear quadrilaterals).  3D: the half model z in [0, width/2] with the
@@ -47,7 +50,15 @@ import skfem
 
 from ._overlap import boundary_faces
 
-__all__ = ["DEFAULT_GEOMETRY", "UnitMesh", "build_unit_mesh", "build_actuator_mesh", "build_grid_mesh", "layer_counts"]
+__all__ = [
+    "DEFAULT_GEOMETRY",
+    "UnitMesh",
+    "build_unit_mesh",
+    "build_actuator_mesh",
+    "build_grid_mesh",
+    "layer_counts",
+    "round_corners",
+]
 
 #: Table 6 values used by the unit model, mm.
 DEFAULT_GEOMETRY: dict[str, float] = {
@@ -62,6 +73,7 @@ DEFAULT_GEOMETRY: dict[str, float] = {
     "ac_th_side": 3.0,
     "paper_width": 0.2,
     "n_chambers": 3,
+    "fillet": 0.0,
 }
 
 # Local node offsets (dx, dy[, dz]) in scikit-fem's node order of a cell
@@ -138,6 +150,31 @@ def _divisions(breaks: np.ndarray, h: float) -> np.ndarray:
         n = max(1, int(np.ceil((b - a) / h - 1e-9)))
         pts.append(np.linspace(a, b, n + 1)[1:])
     return np.concatenate(pts)
+
+
+def round_corners(p: np.ndarray, corners: Sequence[tuple[float, float, float, float]], r: float) -> np.ndarray:
+    """Node coordinates with each corner of the x-y section rounded to a fillet of radius ``r`` (mm).
+
+    ``corners``: (x, y, sx, sy) per corner, (sx, sy) = +-1 pointing out of the solid.  The nodes in the
+    r x r square inside each corner are mapped radially from the fillet's centre: a node at offsets
+    v = (a, b) from the centre moves to v max(a, b) / |v|, so the square's two outer sides land on the
+    quarter circle while its two inner sides, and everything outside the square, stay where they are
+    (the map is continuous with the unmoved mesh).  3D: the same map for every z.
+    """
+    q = p.copy()
+    if r <= 0.0:
+        return q
+    tol = 1e-9 * max(1.0, r)
+    for x, y, sx, sy in corners:
+        cx, cy = x - sx * r, y - sy * r
+        a, b = sx * (p[0] - cx), sy * (p[1] - cy)
+        inside = (a >= -tol) & (a <= r + tol) & (b >= -tol) & (b <= r + tol)
+        a, b = np.clip(a[inside], 0.0, r), np.clip(b[inside], 0.0, r)
+        n2 = np.hypot(a, b)
+        f = np.divide(np.maximum(a, b), n2, out=np.ones_like(n2), where=n2 > tol)
+        q[0, inside] = cx + sx * a * f
+        q[1, inside] = cy + sy * b * f
+    return q
 
 
 def _orient(p: np.ndarray, faces: np.ndarray, centroids: np.ndarray) -> np.ndarray:
@@ -277,6 +314,11 @@ def _chain_mesh(
     yb = y0 + bl  # top of the base layer = block base
     yf = yb + float(g.get("ac_th_down", 0.0))  # pocket floor (the block base unless the section has a floor)
     yp = yb + H - tu  # pocket roof
+    fillet = float(g.get("fillet", 0.0))
+    if fillet < 0.0 or fillet > min(tf, tu) + 1e-12:
+        raise ValueError(
+            f"fillet {fillet:g} mm must lie in [0, {min(tf, tu):g}] mm (the block's wall ac_th_for and roof ac_th_up)"
+        )
     if yf < yb or yp - yf <= 1e-9 * max(H, 1.0):
         raise ValueError(f"pocket floor {yf - yb:g} mm must lie below the pocket roof ({H - tu:g} mm above the base)")
     yt = yb + H  # block top
@@ -405,6 +447,12 @@ def _chain_mesh(
                 facets[f"cavity_{side}_{name}"] = faces[sel]
             facets[f"outer_{side}"] = faces[np.abs(ys - yt) < tol]
         nodes["backbone"] = np.flatnonzero(paper)
+    fillet = float(g.get("fillet", 0.0))
+    if fillet > 0.0:
+        # the blocks' outer corners, both sides; every set above was selected on the square geometry
+        blocks = [(k * (d + gap), k * (d + gap) + d) for k in range(n)]
+        corners = [(x, sgn * yt, sx, sgn) for a, b in blocks for x, sx in ((a, -1.0), (b, 1.0)) for sgn in (1.0, -1.0)]
+        mesh = type(mesh)(round_corners(mesh.p, corners, fillet), mesh.t)
     return UnitMesh(
         mesh=mesh,
         material=material,
