@@ -55,6 +55,9 @@ DEFAULT_SOLVER = {
     # violate the near-incompressibility, start Newton 1000x above the load increment and stall the ray
     "predictor": None,
     "line_search": True,  # Matthies-Strang line search on the Newton correction
+    # a path that stops compares the tangent's eigenvalue nearest zero at its last converged state with the one at
+    # its start when it has at most this many unknowns: a limit point or a non-smooth stall (docs/fea.md)
+    "diagnose_max_unknowns": 60000,
 }
 
 
@@ -250,6 +253,43 @@ class PathResult:
     history: list = field(default_factory=list)
     timing: dict = field(default_factory=dict)
     state: np.ndarray | None = field(default=None, repr=False)
+    #: a path that stopped: the real part of the reduced tangent's eigenvalue nearest zero at the last converged
+    #: state, N/mm (NaN if not examined)
+    min_eigenvalue: float = np.nan
+
+
+def tangent_eigenvalue(model: Model, u: np.ndarray, lam: float, p_ref: np.ndarray) -> float:
+    """Real part of the eigenvalue nearest zero of the reduced tangent T^T K T at the state u, N/mm.
+
+    The tangent is not symmetric (follower pressure, interpolated contact normals), so this is the eigenvalue of
+    the matrix itself (shift-invert Arnoldi just below zero), not of its symmetric part.  Along a stable loading path
+    every eigenvalue has a positive real part; one that has crossed zero marks a limit or bifurcation point, where no
+    load step under load control can converge.  NaN if it cannot be computed.
+    """
+    import scipy.sparse.linalg as sla
+
+    _, K, _ = model.evaluate(u, lam, p_ref)
+    if K is None:
+        return np.nan
+    Kr = _linsolve.reduce_matrix(K, model.T).tocsc()
+    shift = -1e-9 * float(np.median(np.abs(Kr.diagonal()))) or -1e-12
+    try:
+        vals = sla.eigs(Kr, k=min(3, Kr.shape[0] - 2), sigma=shift, which="LM", return_eigenvectors=False)
+    except Exception:  # a singular shift or no convergence of the Arnoldi iteration: say nothing
+        return np.nan
+    return float(vals[np.argmin(np.abs(vals))].real)
+
+
+def _stall_diagnosis(last: float, start: float) -> str:
+    """What the eigenvalue nearest zero at the last converged state (``last``) and at the path's start says, N/mm."""
+    if not (np.isfinite(last) and np.isfinite(start)):
+        return ""
+    where = f"eigenvalue nearest zero {last:.2g} N/mm there, {start:.2g} at the start"
+    if last < 0:
+        return f"; the tangent has a negative eigenvalue ({where}): past a limit or bifurcation point"
+    if last < 0.1 * start:
+        return f"; the tangent is nearly singular ({where}): a limit point"
+    return f"; the tangent stays regular ({where}): a non-smooth stall (contact or an element inverting), not a limit point"
 
 
 def _slope(model: Model, u: np.ndarray, du: np.ndarray, lam: float, p_ref: np.ndarray) -> float:
@@ -375,7 +415,7 @@ def solve_path(
         u = np.array(u0, float)
     else:
         u = np.concatenate([np.asarray(u0, float), np.zeros(model.nstate - model.n)])
-    u_prev = u.copy()
+    u_prev, u_start = u.copy(), u.copy()
     lam, dlam, dlam_prev = 0.0, float(opts["initial_step"]), 0.0
     history, iters, steps, cuts = [], 0, 0, 0
     status, reason = 0, ""
@@ -438,6 +478,10 @@ def solve_path(
                 break
     if status == 0:
         reason = ""
+    min_eig = np.nan
+    if status == 1 and model.m <= int(opts["diagnose_max_unknowns"]):
+        min_eig = tangent_eigenvalue(model, u, lam, p_ref)
+        reason += _stall_diagnosis(min_eig, tangent_eigenvalue(model, u_start, 0.0, p_ref))
     timing = dict(model.timing)
     timing["wall_s"] = time.perf_counter() - t_start
     return PathResult(
@@ -451,4 +495,5 @@ def solve_path(
         history=history,
         timing=timing,
         state=u,
+        min_eigenvalue=min_eig,
     )
