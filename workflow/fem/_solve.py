@@ -274,7 +274,10 @@ def tangent_eigenvalue(model: Model, u: np.ndarray, lam: float, p_ref: np.ndarra
     Kr = _linsolve.reduce_matrix(K, model.T).tocsc()
     shift = -1e-9 * float(np.median(np.abs(Kr.diagonal()))) or -1e-12
     try:
-        vals = sla.eigs(Kr, k=min(3, Kr.shape[0] - 2), sigma=shift, which="LM", return_eigenvectors=False)
+        # bounded: a stop's diagnosis must never cost more than the stop
+        vals = sla.eigs(
+            Kr, k=min(3, Kr.shape[0] - 2), sigma=shift, which="LM", return_eigenvectors=False, tol=1e-8, maxiter=300
+        )
     except Exception:  # a singular shift or no convergence of the Arnoldi iteration: say nothing
         return np.nan
     return float(vals[np.argmin(np.abs(vals))].real)
