@@ -7,7 +7,10 @@ moment) at 60 / 180 / 300 kPa, and for a ray that stops the solver's reason, whi
 eigenvalue nearest zero at the last converged state with the one at rest (a limit point or a non-smooth stall).
 
     OMP_NUM_THREADS=1 python benchmarks/study_fillet.py [--cases 2:1:0,2:1:2] [--restarts] [--jobs 2]
-        -> benchmarks/out/fillet.csv
+        [--friction 0.5 --friction-factor 0.1 --out fillet_friction.csv]       -> benchmarks/out/fillet.csv
+
+``--friction`` sets the Coulomb coefficient of the silicone self-contact (2D; ``actuator.contact.friction`` of the
+engine, 0 by default) and ``--friction-factor`` its tangential penalty as a multiple of the normal one.
 
 A case is ``dim:h:r[:case[:side]]`` (mm; case ``free`` or ``blocked``; side ``both`` (default), or ``bottom`` /
 ``top``: only that side's corners rounded, the other side's square, to tell which side's corners decide).
@@ -39,7 +42,7 @@ DEFAULT_CASES = (
 )
 
 
-def run_case(spec: str, restarts: bool) -> dict:
+def run_case(spec: str, restarts: bool, friction: float = 0.0, friction_factor: float = 0.1) -> dict:
     parts = spec.split(":")
     dim, h, r = int(parts[0]), float(parts[1]), float(parts[2])
     case = parts[3] if len(parts) > 3 else "free"
@@ -48,6 +51,7 @@ def run_case(spec: str, restarts: bool) -> dict:
     act["geometry"] = {**act.get("geometry", {}), "fillet": r}
     if not restarts:
         act["restarts"] = []
+    act["contact"] = {**act.get("contact", {}), "friction": friction, "friction_penalty_factor": friction_factor}
     um = build_unit_mesh(act["geometry"], h=h, dim=dim, **layer_options(act))
     if side != "both":  # put the other side's nodes back on the square geometry
         square = build_unit_mesh({**act["geometry"], "fillet": 0.0}, h=h, dim=dim, **layer_options(act)).mesh.p
@@ -65,6 +69,8 @@ def run_case(spec: str, restarts: bool) -> dict:
         "h_mm": h,
         "fillet_mm": r,
         "rounded": side,
+        "friction": friction,
+        "friction_penalty_factor": friction_factor,
         "case": case,
         "status": res.status,
         "load_reached": res.load_factor,
@@ -85,13 +91,17 @@ def main(argv=None) -> None:
     ap.add_argument("--cases", default=DEFAULT_CASES)
     ap.add_argument("--restarts", action="store_true", help="with the config's restarts (default: first attempt only)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--friction", type=float, default=0.0)
+    ap.add_argument("--friction-factor", type=float, default=0.1)
+    ap.add_argument("--out", default="fillet.csv")
     args = ap.parse_args(argv)
     specs = [c for c in args.cases.split(",") if c]
+    n = len(specs)
     with ProcessPoolExecutor(args.jobs) as pool:
-        rows = list(pool.map(run_case, specs, [args.restarts] * len(specs)))
+        rows = list(pool.map(run_case, specs, [args.restarts] * n, [args.friction] * n, [args.friction_factor] * n))
     OUT.mkdir(exist_ok=True)
     df = pd.DataFrame(rows)
-    df.to_csv(OUT / "fillet.csv", index=False)
+    df.to_csv(OUT / args.out, index=False)
     print(df.to_string())
 
 

@@ -247,3 +247,84 @@ def test_newton_converges_quadratically_on_a_contact_step_whose_active_set_does_
     # the last contraction before convergence (above round-off) is quadratic
     k = int(np.flatnonzero(r > 1e-7)[-1])
     assert r[k + 1] <= 10.0 * r[k] ** 2, r
+
+
+def _sliding_block(dx_mm: float, mu: float, friction_factor: float = 0.1):
+    """A 2 x 2 mm silicone block pressed 0.1 mm into a wider one (after a 0.1 mm gap) and pushed along it.
+
+    Plane strain, h = 0.5 mm; the wide block's base is fixed, the small block's top face is moved by
+    (dx_mm, -0.2 mm), proportionally.  Returns the pair, the model and the final nodal positions (mm).
+    """
+    from workflow.fem._mesh import build_grid_mesh
+    from workflow.fem._solve import Model, solve_path
+    from workflow.fem._unit import DEFAULT_FORMULATION, material_constants, solid_assembler
+
+    xs = np.linspace(0.0, 6.0, 13)
+    ys = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 2.1, 2.6, 3.1, 3.6, 4.1])
+
+    def keep(c):
+        upper = c[1] > 2.1
+        return (~upper & (c[1] < 2.0)) | (upper & (c[0] > 1.0) & (c[0] < 3.0))
+
+    mesh, faces, _ = build_grid_mesh([xs, ys], keep)
+    p = mesh.p
+    mid = p[:, faces].mean(axis=2)
+    master, slave = faces[np.abs(mid[1] - 2.0) < 1e-9], faces[np.abs(mid[1] - 2.1) < 1e-9]
+    mat = material_constants()
+    solid = solid_assembler(mesh, np.zeros(mesh.t.shape[1], int), mat, DEFAULT_FORMULATION)
+    base, top = np.flatnonzero(p[1] < 1e-9), np.flatnonzero(np.abs(p[1] - 4.1) < 1e-9)
+    moved = {int(2 * n): dx_mm for n in top} | {int(2 * n + 1): -0.2 for n in top}
+    pair = ContactPair(p, slave, master, search=1.0, extend=0.0, smoothing=0.0)
+    pair.mu, pair.friction_factor = mu, friction_factor
+    eps = 100.0 * mat["mu0"]  # the unit's penalty, MPa/mm
+    model = Model(solid, contacts=[pair], penalty=eps, fixed=np.concatenate([2 * base, 2 * base + 1]), prescribed=moved)
+    res = solve_path(model, p, {"initial_step": 0.05, "max_step": 0.1})
+    assert res.status == 0, res.reason
+    return pair, eps, model.positions(res.u, p)
+
+
+@pytest.mark.parametrize("mu", [0.2, 0.5])
+def test_a_sliding_block_carries_mu_times_its_normal_force(mu):
+    pair, eps, x = _sliding_block(1.0, mu)
+    _, f, _, _ = pair.evaluate(x, eps, tangent=False)
+    tangential, normal = -f[:, 0].sum(), -f[:, 1].sum()  # force of the wide block on the slaves, N per mm
+    assert normal > 0.1
+    # Coulomb: every slave slides, so the tangential force is mu times the normal force, opposing the push
+    # (2 %: the pushed block tilts, so its facets' normals are not quite the y axis)
+    assert -tangential / normal == pytest.approx(mu, rel=0.02)
+
+
+def test_a_block_pushed_less_than_the_friction_limit_sticks_and_frictionless_contact_carries_no_shear():
+    pair, eps, x = _sliding_block(0.05, 0.5)
+    _, f, _, _ = pair.evaluate(x, eps, tangent=False)
+    assert 0 < f[:, 0].sum() / -f[:, 1].sum() < 0.25  # well below mu = 0.5: it sticks
+    assert (pair.anchor_facet >= 0).all()
+    pair, eps, x = _sliding_block(1.0, 0.0)
+    _, f, _, _ = pair.evaluate(x, eps, tangent=False)
+    assert abs(f[:, 0].sum()) < 1e-9 * abs(f[:, 1].sum())
+
+
+def test_friction_tangent_matches_finite_differences_in_stick_and_slip():
+    def assembled(pair, x, eps, tangent=False):
+        dofs, f, K, _ = pair.evaluate(x, eps, tangent)
+        r = np.bincount(dofs.ravel(), weights=f.ravel(), minlength=x.size)
+        if not tangent:
+            return r
+        k = dofs.shape[1]
+        rows, cols = np.repeat(dofs, k, axis=1).ravel(), np.tile(dofs, (1, k)).ravel()
+        Kg = np.zeros((x.size, x.size))
+        np.add.at(Kg, (rows, cols), K.ravel())
+        return r, Kg
+
+    for dx in (0.05, 1.0):  # stick, slip
+        pair, eps, x = _sliding_block(dx, 0.5)
+        if dx > 0.5:
+            # a slipping slave's anchor sits exactly at the friction limit after the step (return mapping): move
+            # the slaves on by 1 um so that each lies inside the slip branch, not on the switch between the two
+            x = x.copy()
+            x[0, pair.slave] += 1e-3
+        _, K = assembled(pair, x, eps, tangent=True)
+        v = np.random.default_rng(0).standard_normal(x.shape) * 1e-6
+        fd = (assembled(pair, x + v, eps) - assembled(pair, x - v, eps)) / 2.0
+        lin = K @ v.T.ravel()  # node-interleaved dofs
+        assert np.abs(fd - lin).max() <= 1e-4 * np.abs(lin).max()

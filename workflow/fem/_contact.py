@@ -30,6 +30,14 @@ e.g. Wriggers, Computational Contact Mechanics, ch. 9 on smoothing).  The
 force is not the gradient of a potential any more (the tangent is not
 symmetric); Newton uses its exact finite-difference tangent.
 
+Friction (2D, ``mu`` > 0; frictionless by default, as the paper's Marc model): regularised Coulomb.  A slave
+that comes into contact sticks, at the end of that load step (``commit``), to the master point it touches, as
+(facet, xi); afterwards a tangential penalty eps_t = ``friction_factor`` * eps per unit area holds it there, with
+the force capped at mu times its normal force (slip).  At the end of each accepted step a slipping slave's anchor
+is moved along its current facet to the cap's distance behind it (return mapping); a slave that leaves contact
+loses its anchor.  The tangent is the same vectorised central difference, over the slave, its facet's four nodes
+and the anchor facet's two.
+
 Over 400 lines: the penalty law, the facet search and its exact tangent are one algorithm; their conventions (facet orientation, parameter ranges) must change together.
 """
 
@@ -306,6 +314,12 @@ class ContactPair:
         )
         self._pad = np.where(np.arange(width)[None, :] >= np.array([q.size for q in pools])[:, None], 1e9, 0.0)
         self.search = search
+        # Coulomb friction (2D; mu = 0: none): per slave the master point it sticks to, as (facet, xi), set at
+        # the accepted step where it came into contact (`commit`); -1 = none
+        self.mu = 0.0
+        self.friction_factor = 1.0
+        self.anchor_facet = -np.ones(self.slave.size, dtype=np.int64)
+        self.anchor_xi = np.zeros(self.slave.size)
         # allowed parameter range per master facet: [0, 1] (2D) / [-1, 1]^2 (3D), widened at free edges
         nodes, cnt = np.unique(master_facets, return_counts=True)
         edge_count = 1 if self.dim == 2 else 2
@@ -480,6 +494,69 @@ class ContactPair:
             t = np.minimum(g, 0.0)
         return (eps_area * w * t)[:, None] * dg
 
+    def _local_friction(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple, xi0: np.ndarray) -> np.ndarray:
+        """Normal penalty force plus Coulomb friction for 2D node sets X (nc, 7, 2).
+
+        Nodes: slave, the current master facet (a, b, node before a, node after b) and the anchor facet (a0, b0).
+        The slave's tangential offset from its anchor xA = (1 - xi0) x_a0 + xi0 x_b0 is held by a penalty
+        eps_t = friction_factor * eps per unit area, capped at mu times the normal force (slip).
+        """
+        fn = self._local_force(X[:, :5], eps_area, lim)  # (nc, 10)
+        xs = X[:, 0]
+        _, n, _ = _segment_2d(X[:, :5], lim[2], lim[3])
+        # normal force magnitude: the slave's share of the penalty force
+        pn = np.abs(np.einsum("ci,ci->c", fn[:, :2], n))
+        xa = (1.0 - xi0)[:, None] * X[:, 5] + xi0[:, None] * X[:, 6]
+        d = xs - xa
+        dt = d - np.einsum("ci,ci->c", d, n)[:, None] * n
+        ft = self.friction_factor * eps_area[:, None] * dt  # residual = energy gradient: + k dt on the slave
+        mag = np.linalg.norm(ft, axis=1)
+        cap = self.mu * pn
+        scale = np.where(mag > cap, cap / np.maximum(mag, 1e-300), 1.0)
+        ft = ft * scale[:, None]
+        f = np.zeros((X.shape[0], 14))
+        f[:, :10] = fn
+        f[:, :2] += ft
+        f[:, 10:12] -= (1.0 - xi0)[:, None] * ft
+        f[:, 12:14] -= xi0[:, None] * ft
+        return f
+
+    def _friction_on(self) -> bool:
+        return self.mu > 0.0 and self.dim == 2
+
+    def commit(self, x: np.ndarray, eps: float) -> None:
+        """After an accepted step: slaves in contact keep (or, slipping, drag along) their anchor; others lose it."""
+        if not self._friction_on():
+            return
+        m, N, n, g, inside = self._project(x)
+        act = inside & (np.abs(g) <= self.search) & (g < self.smoothing)
+        new = act & (self.anchor_facet < 0)
+        self.anchor_facet[new], self.anchor_xi[new] = m[new], N[new, 1]
+        self.anchor_facet[~act] = -1
+        old = np.flatnonzero(act & ~new)
+        if old.size:
+            # slip: move the anchor along the slave's current facet to the cap's distance behind the slave
+            nodes = np.concatenate([self.slave[old, None], self._nodes_2d(m[old])], axis=1)
+            a0, b0 = self.master[self.anchor_facet[old], 0], self.master[self.anchor_facet[old], 1]
+            X = x[:, np.concatenate([nodes, a0[:, None], b0[:, None]], axis=1)].transpose(1, 2, 0)
+            w = eps * self.penalty_factor * self.area[old]
+            lim = (self.lo[m[old]], self.hi[m[old]], self.prev[m[old]] >= 0, self.next[m[old]] >= 0)
+            fn = self._local_force(X[:, :5], w, lim)
+            pn = np.abs(np.einsum("ci,ci->c", fn[:, :2], n[old]))
+            xa = (1.0 - self.anchor_xi[old])[:, None] * X[:, 5] + self.anchor_xi[old][:, None] * X[:, 6]
+            d = X[:, 0] - xa
+            dt = d - np.einsum("ci,ci->c", d, n[old])[:, None] * n[old]
+            trial = self.friction_factor * w * np.linalg.norm(dt, axis=1)
+            slip = trial > self.mu * pn
+            if slip.any():
+                k = old[slip]
+                t = X[slip, 2] - X[slip, 1]
+                ell = self.mu * pn[slip] / (self.friction_factor * w[slip])  # mm behind the slave
+                along = np.einsum("ci,ci->c", dt[slip], t) / np.linalg.norm(t, axis=1)
+                xi_new = N[k, 1] - np.sign(along) * ell / np.linalg.norm(t, axis=1)
+                self.anchor_facet[k] = m[k]
+                self.anchor_xi[k] = np.clip(xi_new, 0.0, 1.0)
+
     def evaluate(self, x: np.ndarray, eps: float, tangent: bool = True):
         """Penalty forces (to add to the residual) and tangent for current nodes ``x``.
 
@@ -495,15 +572,24 @@ class ContactPair:
         if not act.any():
             return np.zeros((0, 0), int), np.zeros((0, 0)), (np.zeros((0, 0, 0)) if tangent else None), gmin
         ma = m[act]
+        friction = self._friction_on()
         if dim == 2:  # slave, facet (a, b) and the neighbours that set its nodal normals
             nodes = np.concatenate([self.slave[act, None], self._nodes_2d(ma)], axis=1)
             lim = (self.lo[ma], self.hi[ma], self.prev[ma] >= 0, self.next[ma] >= 0)
+            if friction:  # the anchor facet's nodes (the current facet's with no force where there is no anchor)
+                af = self.anchor_facet[act]
+                has = af >= 0
+                a0 = np.where(has, self.master[np.maximum(af, 0), 0], nodes[:, 1])
+                b0 = np.where(has, self.master[np.maximum(af, 0), 1], nodes[:, 2])
+                nodes = np.concatenate([nodes, a0[:, None], b0[:, None]], axis=1)
+                xi0 = np.where(has, self.anchor_xi[act], 0.0)
         else:
             nodes = np.concatenate([self.slave[act, None], self.master[ma]], axis=1)
             lim = (self.lim[ma],)
         X = x[:, nodes].transpose(1, 2, 0)  # (nc, nn, dim)
         w = eps * self.penalty_factor * self.area[act]
-        f = self._local_force(X, w, lim)
+        # a slave without an anchor (it came into contact during this step) gets the normal force alone
+        f = self._friction_or_normal(X, w, lim, has, xi0) if friction else self._local_force(X, w, lim)
         dofs = (dim * nodes[:, :, None] + np.arange(dim)).reshape(nodes.shape[0], -1)
         K = None
         if tangent:
@@ -514,9 +600,22 @@ class ContactPair:
             Xf = X.reshape(nc, -1)
             Xb = np.concatenate([Xf[None] + E[:, None, :], Xf[None] - E[:, None, :]])  # (2nd, nc, nd)
             limb = tuple(np.tile(a, (2 * nd,) + (1,) * (a.ndim - 1)) for a in lim)
-            fb = self._local_force(Xb.reshape((-1,) + X.shape[1:]), np.tile(w, 2 * nd), limb).reshape(2, nd, nc, nd)
-            K = ((fb[0] - fb[1]) / (2 * step)).transpose(1, 2, 0)
+            if friction:
+                hb, xb = np.tile(has, 2 * nd), np.tile(xi0, 2 * nd)
+                fb = self._friction_or_normal(Xb.reshape((-1,) + X.shape[1:]), np.tile(w, 2 * nd), limb, hb, xb)
+            else:
+                fb = self._local_force(Xb.reshape((-1,) + X.shape[1:]), np.tile(w, 2 * nd), limb)
+            K = (fb.reshape(2, nd, nc, nd)[0] - fb.reshape(2, nd, nc, nd)[1]) / (2 * step)
+            K = K.transpose(1, 2, 0)
         return dofs, f, K, gmin
+
+    def _friction_or_normal(self, X, w, lim, has, xi0):
+        """Friction where a slave has an anchor, the normal force alone (padded to the 7-node set) elsewhere."""
+        f = self._local_friction(X, w, lim, xi0)
+        if (~has).any():
+            f[~has, 10:] = 0.0
+            f[~has, :10] = self._local_force(X[~has, :5], w[~has], tuple(a[~has] for a in lim))
+        return f
 
     def energy(self, x: np.ndarray, eps: float) -> float:
         _, _, _, g, inside = self._project(x)
@@ -525,7 +624,13 @@ class ContactPair:
 
 
 def contact_pairs_from_mesh(
-    unit_mesh, search: float = 1.0, extend: float = 0.5, smoothing: float = 0.0, smooth_normals: bool = True
+    unit_mesh,
+    search: float = 1.0,
+    extend: float = 0.5,
+    smoothing: float = 0.0,
+    smooth_normals: bool = True,
+    friction: float = 0.0,
+    friction_penalty_factor: float = 0.1,
 ) -> list[ContactPair]:
     """Self-contact of every contact surface of a ``UnitMesh`` (each gap's U, each pocket's walls) as one pair.
 
@@ -540,6 +645,8 @@ def contact_pairs_from_mesh(
     if not surfaces:
         return []
     parts = [unit_mesh.contact_parts.get(name) for name in unit_mesh.contact_surfaces]
-    return [
-        ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals, parts=parts)
-    ]
+    pair = ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals, parts=parts)
+    if friction > 0.0 and unit_mesh.dim != 2:
+        raise ValueError("contact friction is built for the 2D models only")
+    pair.mu, pair.friction_factor = float(friction), float(friction_penalty_factor)
+    return [pair]

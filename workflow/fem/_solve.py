@@ -451,6 +451,9 @@ def solve_path(
         if ok:
             u_prev, u = u, u_new
             lam, dlam_prev = target, target - lam
+            for pair in model.contacts:  # path-dependent contact state (friction anchors) moves on with the path
+                if getattr(pair, "mu", 0.0) > 0.0:
+                    pair.commit(model.positions(u, p_ref), model.penalty)
             rec = {
                 "lam": lam,
                 "iterations": its,

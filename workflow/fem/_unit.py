@@ -111,6 +111,8 @@ DEFAULT_CONTACT = {
     "search_mm": 1.0,
     "extend": 0.5,
     "smoothing_mm": 0.01,
+    "friction": 0.0,  # Coulomb coefficient between silicone surfaces (2D only; 0: frictionless, as the paper's Marc model)
+    "friction_penalty_factor": 0.1,  # tangential penalty = this x the normal one (sticking slaves slip by t_T / eps_t)
 }
 
 
@@ -281,7 +283,18 @@ def unit_model(
     }
     copts = dict(DEFAULT_CONTACT)
     copts.update(dict(contact_options or {}))
-    pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["extend"], copts["smoothing_mm"]) if contact else []
+    pairs = (
+        contact_pairs_from_mesh(
+            um,
+            copts["search_mm"],
+            copts["extend"],
+            copts["smoothing_mm"],
+            friction=copts["friction"],
+            friction_penalty_factor=copts["friction_penalty_factor"],
+        )
+        if contact
+        else []
+    )
     return Model(
         solid,
         pressures=pressures,

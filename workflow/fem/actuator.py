@@ -94,7 +94,18 @@ def actuator_model(
         fixed.append(dim * um.nodes["symmetry"] + 2)
     copts = dict(DEFAULT_CONTACT)
     copts.update(dict(contact_options or {}))
-    pairs = contact_pairs_from_mesh(um, copts["search_mm"], copts["extend"], copts["smoothing_mm"]) if contact else []
+    pairs = (
+        contact_pairs_from_mesh(
+            um,
+            copts["search_mm"],
+            copts["extend"],
+            copts["smoothing_mm"],
+            friction=copts["friction"],
+            friction_penalty_factor=copts["friction_penalty_factor"],
+        )
+        if contact
+        else []
+    )
     return Model(
         solid,
         pressures=group_pressures(um, pressures_kpa),

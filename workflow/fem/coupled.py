@@ -271,7 +271,14 @@ def coupled_model(
         extras.append(hand)
     if setup.gravity is not None:
         extras.append(DeadLoad(setup.gravity, ramp=gravity_ramp))
-    pairs = contact_pairs_from_mesh(cm.um, c["search_mm"], c["extend"], c["smoothing_mm"])
+    pairs = contact_pairs_from_mesh(
+        cm.um,
+        c["search_mm"],
+        c["extend"],
+        c["smoothing_mm"],
+        friction=c.get("friction", 0.0),
+        friction_penalty_factor=c.get("friction_penalty_factor", 0.1),
+    )
     skin, bottom = cm.um.facets["finger_dorsal"], cm.um.facets["outer_bottom"]
     fac = float(c["finger_penalty"]) / eps  # own penalty (see the module docstring)
     finger_pairs = [
