@@ -30,13 +30,13 @@ e.g. Wriggers, Computational Contact Mechanics, ch. 9 on smoothing).  The
 force is not the gradient of a potential any more (the tangent is not
 symmetric); Newton uses its exact finite-difference tangent.
 
-Friction (2D, ``mu`` > 0; frictionless by default, as the paper's Marc model): regularised Coulomb.  A slave
+Friction (``mu`` > 0; frictionless by default, as the paper's Marc model): regularised Coulomb.  A slave
 that comes into contact sticks, at the end of that load step (``commit``), to the master point it touches, as
 (facet, xi); afterwards a tangential penalty eps_t = ``friction_factor`` * eps per unit area holds it there, with
 the force capped at mu times its normal force (slip).  At the end of each accepted step a slipping slave's anchor
 is moved along its current facet to the cap's distance behind it (return mapping); a slave that leaves contact
-loses its anchor.  The tangent is the same vectorised central difference, over the slave, its facet's four nodes
-and the anchor facet's two.
+loses its anchor.  The tangent is the same vectorised central difference, over the slave, its current facet's
+nodes and the anchor facet's (2D: 4 + 2, 3D: 4 + 4).
 
 Over 400 lines: the penalty law, the facet search and its exact tangent are one algorithm; their conventions (facet orientation, parameter ranges) must change together.
 """
@@ -319,7 +319,7 @@ class ContactPair:
         self.mu = 0.0
         self.friction_factor = 1.0
         self.anchor_facet = -np.ones(self.slave.size, dtype=np.int64)
-        self.anchor_xi = np.zeros(self.slave.size)
+        self.anchor_xi = np.zeros((self.slave.size, 2))
         # allowed parameter range per master facet: [0, 1] (2D) / [-1, 1]^2 (3D), widened at free edges
         nodes, cnt = np.unique(master_facets, return_counts=True)
         edge_count = 1 if self.dim == 2 else 2
@@ -433,7 +433,7 @@ class ContactPair:
         N = np.stack([1.0 - xi_s, xi_s], axis=1)
         return cand[s, j], N, n[s, j], g[s, j], within[s, j]
 
-    def _local_force(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple) -> np.ndarray:
+    def _local_force(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple, return_normal: bool = False):
         """Penalty force eps A w g dg (nc, nn*dim) for local node sets X (nc, nn, dim) = slave + master facet.
 
         w is 1 on the master facet and fades smoothly to 0 over its extension
@@ -492,37 +492,72 @@ class ContactPair:
             t = np.where(g <= 0.0, g - 0.5 * d, -((np.clip(d - g, 0.0, None)) ** 2) / (2.0 * d))
         else:
             t = np.minimum(g, 0.0)
-        return (eps_area * w * t)[:, None] * dg
+        f = (eps_area * w * t)[:, None] * dg
+        return (f, n) if return_normal else f
+
+    def _anchor_weights(self, xi0: np.ndarray) -> np.ndarray:
+        """Shape functions (nc, 2 or 4) of the anchor facet at its parameters xi0 (nc, 2)."""
+        if self.dim == 2:
+            return np.stack([1.0 - xi0[:, 0], xi0[:, 0]], axis=1)
+        return 0.25 * (1 + _XI[:, 0] * xi0[:, 0, None]) * (1 + _XI[:, 1] * xi0[:, 1, None])
+
+    def _friction_terms(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple, xi0: np.ndarray):
+        """Normal force fn (nc, 5 dim), normal n, normal force magnitude pn, anchor weights W and the slave's
+        tangential offset dt (mm) from its anchor, for node sets X = slave, current facet (4 nodes), anchor facet."""
+        fn, n = self._local_force(X[:, :5], eps_area, lim, return_normal=True)
+        d = self.dim
+        pn = np.abs(np.einsum("ci,ci->c", fn[:, :d], n))  # the slave's share of the penalty force
+        W = self._anchor_weights(xi0)
+        dv = X[:, 0] - np.einsum("ca,cai->ci", W, X[:, 5:])
+        dt = dv - np.einsum("ci,ci->c", dv, n)[:, None] * n
+        return fn, n, pn, W, dt
 
     def _local_friction(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple, xi0: np.ndarray) -> np.ndarray:
-        """Normal penalty force plus Coulomb friction for 2D node sets X (nc, 7, 2).
+        """Normal penalty force plus Coulomb friction for node sets X (nc, 5 + na, dim).
 
-        Nodes: slave, the current master facet (a, b, node before a, node after b) and the anchor facet (a0, b0).
-        The slave's tangential offset from its anchor xA = (1 - xi0) x_a0 + xi0 x_b0 is held by a penalty
-        eps_t = friction_factor * eps per unit area, capped at mu times the normal force (slip).
+        Nodes: slave, the current master facet (2D: a, b, node before a, node after b; 3D: its four nodes) and
+        the anchor facet (na = 2 / 4 nodes).  The slave's tangential offset from its anchor (the anchor facet's
+        point at parameters xi0) is held by a penalty eps_t = friction_factor * eps per unit area, capped at mu
+        times the normal force (slip).
         """
-        fn = self._local_force(X[:, :5], eps_area, lim)  # (nc, 10)
-        xs = X[:, 0]
-        _, n, _ = _segment_2d(X[:, :5], lim[2], lim[3])
-        # normal force magnitude: the slave's share of the penalty force
-        pn = np.abs(np.einsum("ci,ci->c", fn[:, :2], n))
-        xa = (1.0 - xi0)[:, None] * X[:, 5] + xi0[:, None] * X[:, 6]
-        d = xs - xa
-        dt = d - np.einsum("ci,ci->c", d, n)[:, None] * n
+        fn, _, pn, W, dt = self._friction_terms(X, eps_area, lim, xi0)
         ft = self.friction_factor * eps_area[:, None] * dt  # residual = energy gradient: + k dt on the slave
         mag = np.linalg.norm(ft, axis=1)
         cap = self.mu * pn
-        scale = np.where(mag > cap, cap / np.maximum(mag, 1e-300), 1.0)
-        ft = ft * scale[:, None]
-        f = np.zeros((X.shape[0], 14))
-        f[:, :10] = fn
-        f[:, :2] += ft
-        f[:, 10:12] -= (1.0 - xi0)[:, None] * ft
-        f[:, 12:14] -= xi0[:, None] * ft
+        ft = ft * np.where(mag > cap, cap / np.maximum(mag, 1e-300), 1.0)[:, None]
+        d = self.dim
+        f = np.zeros((X.shape[0], X.shape[1] * d))
+        f[:, : 5 * d] = fn
+        f[:, :d] += ft
+        f[:, 5 * d :] -= (W[:, :, None] * ft[:, None, :]).reshape(X.shape[0], -1)
         return f
 
     def _friction_on(self) -> bool:
-        return self.mu > 0.0 and self.dim == 2
+        return self.mu > 0.0
+
+    def _stencil(self, idx: np.ndarray, m: np.ndarray):
+        """Local node sets (slave, current facet[, anchor facet]) and limits of slaves ``idx`` on facets ``m``."""
+        if self.dim == 2:  # slave, facet (a, b) and the neighbours that set its nodal normals
+            nodes = np.concatenate([self.slave[idx, None], self._nodes_2d(m)], axis=1)
+            lim = (self.lo[m], self.hi[m], self.prev[m] >= 0, self.next[m] >= 0)
+            own = nodes[:, 1:3]
+        else:
+            nodes = np.concatenate([self.slave[idx, None], self.master[m]], axis=1)
+            lim = (self.lim[m],)
+            own = nodes[:, 1:5]
+        if not self._friction_on():
+            return nodes, lim, None, None
+        # the anchor facet's nodes (the current facet's, with no force, where there is no anchor)
+        af = self.anchor_facet[idx]
+        has = af >= 0
+        anchor = np.where(has[:, None], self.master[np.maximum(af, 0)], own)
+        return np.concatenate([nodes, anchor], axis=1), lim, has, np.where(has[:, None], self.anchor_xi[idx], 0.0)
+
+    def _parameters(self, x: np.ndarray, m: np.ndarray, N: np.ndarray) -> np.ndarray:
+        """Facet parameters (k, 2) of projections with shape functions N on facets m (2D: (xi, 0))."""
+        if self.dim == 2:
+            return np.stack([N[:, 1], np.zeros(len(m))], axis=1)
+        return N @ _XI
 
     def commit(self, x: np.ndarray, eps: float) -> None:
         """After an accepted step: slaves in contact keep (or, slipping, drag along) their anchor; others lose it."""
@@ -530,32 +565,44 @@ class ContactPair:
             return
         m, N, n, g, inside = self._project(x)
         act = inside & (np.abs(g) <= self.search) & (g < self.smoothing)
+        param = self._parameters(x, m, N)
         new = act & (self.anchor_facet < 0)
-        self.anchor_facet[new], self.anchor_xi[new] = m[new], N[new, 1]
+        self.anchor_facet[new], self.anchor_xi[new] = m[new], param[new]
         self.anchor_facet[~act] = -1
         old = np.flatnonzero(act & ~new)
-        if old.size:
-            # slip: move the anchor along the slave's current facet to the cap's distance behind the slave
-            nodes = np.concatenate([self.slave[old, None], self._nodes_2d(m[old])], axis=1)
-            a0, b0 = self.master[self.anchor_facet[old], 0], self.master[self.anchor_facet[old], 1]
-            X = x[:, np.concatenate([nodes, a0[:, None], b0[:, None]], axis=1)].transpose(1, 2, 0)
-            w = eps * self.penalty_factor * self.area[old]
-            lim = (self.lo[m[old]], self.hi[m[old]], self.prev[m[old]] >= 0, self.next[m[old]] >= 0)
-            fn = self._local_force(X[:, :5], w, lim)
-            pn = np.abs(np.einsum("ci,ci->c", fn[:, :2], n[old]))
-            xa = (1.0 - self.anchor_xi[old])[:, None] * X[:, 5] + self.anchor_xi[old][:, None] * X[:, 6]
-            d = X[:, 0] - xa
-            dt = d - np.einsum("ci,ci->c", d, n[old])[:, None] * n[old]
-            trial = self.friction_factor * w * np.linalg.norm(dt, axis=1)
-            slip = trial > self.mu * pn
-            if slip.any():
-                k = old[slip]
-                t = X[slip, 2] - X[slip, 1]
-                ell = self.mu * pn[slip] / (self.friction_factor * w[slip])  # mm behind the slave
-                along = np.einsum("ci,ci->c", dt[slip], t) / np.linalg.norm(t, axis=1)
-                xi_new = N[k, 1] - np.sign(along) * ell / np.linalg.norm(t, axis=1)
-                self.anchor_facet[k] = m[k]
-                self.anchor_xi[k] = np.clip(xi_new, 0.0, 1.0)
+        if not old.size:
+            return
+        nodes, lim, _, xi0 = self._stencil(old, m[old])
+        X = x[:, nodes].transpose(1, 2, 0)
+        w = eps * self.penalty_factor * self.area[old]
+        _, _, pn, _, dt = self._friction_terms(X, w, lim, xi0)
+        slip = self.friction_factor * w * np.linalg.norm(dt, axis=1) > self.mu * pn
+        if not slip.any():
+            return
+        # slip: the new anchor lies on the slave's current facet, the cap's distance behind it
+        k = old[slip]
+        ell = self.mu * pn[slip] / (self.friction_factor * w[slip])
+        delta = -ell[:, None] * dt[slip] / np.linalg.norm(dt[slip], axis=1, keepdims=True)
+        p0 = param[k]
+        if self.dim == 2:
+            t = X[slip, 2] - X[slip, 1]
+            p1 = p0[:, 0] + np.einsum("ci,ci->c", delta, t) / np.einsum("ci,ci->c", t, t)
+            self.anchor_xi[k] = np.stack([np.clip(p1, 0.0, 1.0), np.zeros_like(p1)], axis=1)
+        else:
+            xm = X[slip, 1:5]
+            dxi = 0.25 * _XI[:, 0] * (1 + _XI[:, 1] * p0[:, 1, None])
+            deta = 0.25 * _XI[:, 1] * (1 + _XI[:, 0] * p0[:, 0, None])
+            a1, a2 = np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm)
+            M = np.stack(
+                [
+                    np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1),
+                    np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1),
+                ],
+                -2,
+            )
+            rhs = np.stack([(delta * a1).sum(-1), (delta * a2).sum(-1)], -1)
+            self.anchor_xi[k] = np.clip(p0 + np.linalg.solve(M, rhs[..., None])[..., 0], -1.0, 1.0)
+        self.anchor_facet[k] = m[k]
 
     def evaluate(self, x: np.ndarray, eps: float, tangent: bool = True):
         """Penalty forces (to add to the residual) and tangent for current nodes ``x``.
@@ -571,21 +618,8 @@ class ContactPair:
         dim = self.dim
         if not act.any():
             return np.zeros((0, 0), int), np.zeros((0, 0)), (np.zeros((0, 0, 0)) if tangent else None), gmin
-        ma = m[act]
         friction = self._friction_on()
-        if dim == 2:  # slave, facet (a, b) and the neighbours that set its nodal normals
-            nodes = np.concatenate([self.slave[act, None], self._nodes_2d(ma)], axis=1)
-            lim = (self.lo[ma], self.hi[ma], self.prev[ma] >= 0, self.next[ma] >= 0)
-            if friction:  # the anchor facet's nodes (the current facet's with no force where there is no anchor)
-                af = self.anchor_facet[act]
-                has = af >= 0
-                a0 = np.where(has, self.master[np.maximum(af, 0), 0], nodes[:, 1])
-                b0 = np.where(has, self.master[np.maximum(af, 0), 1], nodes[:, 2])
-                nodes = np.concatenate([nodes, a0[:, None], b0[:, None]], axis=1)
-                xi0 = np.where(has, self.anchor_xi[act], 0.0)
-        else:
-            nodes = np.concatenate([self.slave[act, None], self.master[ma]], axis=1)
-            lim = (self.lim[ma],)
+        nodes, lim, has, xi0 = self._stencil(np.flatnonzero(act), m[act])
         X = x[:, nodes].transpose(1, 2, 0)  # (nc, nn, dim)
         w = eps * self.penalty_factor * self.area[act]
         # a slave without an anchor (it came into contact during this step) gets the normal force alone
@@ -601,7 +635,7 @@ class ContactPair:
             Xb = np.concatenate([Xf[None] + E[:, None, :], Xf[None] - E[:, None, :]])  # (2nd, nc, nd)
             limb = tuple(np.tile(a, (2 * nd,) + (1,) * (a.ndim - 1)) for a in lim)
             if friction:
-                hb, xb = np.tile(has, 2 * nd), np.tile(xi0, 2 * nd)
+                hb, xb = np.tile(has, 2 * nd), np.tile(xi0, (2 * nd, 1))
                 fb = self._friction_or_normal(Xb.reshape((-1,) + X.shape[1:]), np.tile(w, 2 * nd), limb, hb, xb)
             else:
                 fb = self._local_force(Xb.reshape((-1,) + X.shape[1:]), np.tile(w, 2 * nd), limb)
@@ -613,8 +647,9 @@ class ContactPair:
         """Friction where a slave has an anchor, the normal force alone (padded to the 7-node set) elsewhere."""
         f = self._local_friction(X, w, lim, xi0)
         if (~has).any():
-            f[~has, 10:] = 0.0
-            f[~has, :10] = self._local_force(X[~has, :5], w[~has], tuple(a[~has] for a in lim))
+            d = self.dim
+            f[~has, 5 * d :] = 0.0
+            f[~has, : 5 * d] = self._local_force(X[~has, :5], w[~has], tuple(a[~has] for a in lim))
         return f
 
     def energy(self, x: np.ndarray, eps: float) -> float:
@@ -646,7 +681,5 @@ def contact_pairs_from_mesh(
         return []
     parts = [unit_mesh.contact_parts.get(name) for name in unit_mesh.contact_surfaces]
     pair = ContactPair.self_contact(unit_mesh.mesh.p, surfaces, search, extend, smoothing, smooth_normals, parts=parts)
-    if friction > 0.0 and unit_mesh.dim != 2:
-        raise ValueError("contact friction is built for the 2D models only")
     pair.mu, pair.friction_factor = float(friction), float(friction_penalty_factor)
     return [pair]
