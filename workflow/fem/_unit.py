@@ -111,9 +111,22 @@ DEFAULT_CONTACT = {
     "search_mm": 1.0,
     "extend": 0.5,
     "smoothing_mm": 0.01,
-    "friction": 0.0,  # Coulomb coefficient between silicone surfaces (2D only; 0: frictionless, as the paper's Marc model)
+    "friction": 0.0,  # Coulomb coefficient between silicone surfaces (0: frictionless, as the paper's Marc model)
     "friction_penalty_factor": 0.1,  # tangential penalty = this x the normal one (sticking slaves slip by t_T / eps_t)
 }
+
+
+def self_contact_pairs(um: UnitMesh, contact_options: Mapping | None = None) -> list:
+    """The self-contact of every gap and pocket of ``um`` with ``contact_options`` over ``DEFAULT_CONTACT``."""
+    c = {**DEFAULT_CONTACT, **dict(contact_options or {})}
+    return contact_pairs_from_mesh(
+        um,
+        c["search_mm"],
+        c["extend"],
+        c["smoothing_mm"],
+        friction=c["friction"],
+        friction_penalty_factor=c["friction_penalty_factor"],
+    )
 
 
 def contact_penalty(mat: Mapping, contact: Mapping) -> float:
@@ -281,20 +294,8 @@ def unit_model(
         "top": (um.facets["cavity_top"], 1e-3 * float(p_top_kpa)),
         "bottom": (um.facets["cavity_bottom"], 1e-3 * float(p_bottom_kpa)),
     }
-    copts = dict(DEFAULT_CONTACT)
-    copts.update(dict(contact_options or {}))
-    pairs = (
-        contact_pairs_from_mesh(
-            um,
-            copts["search_mm"],
-            copts["extend"],
-            copts["smoothing_mm"],
-            friction=copts["friction"],
-            friction_penalty_factor=copts["friction_penalty_factor"],
-        )
-        if contact
-        else []
-    )
+    copts = {**DEFAULT_CONTACT, **dict(contact_options or {})}
+    pairs = self_contact_pairs(um, copts) if contact else []
     return Model(
         solid,
         pressures=pressures,

@@ -21,7 +21,6 @@ from typing import Mapping
 
 import numpy as np
 
-from workflow.fem._contact import contact_pairs_from_mesh
 from workflow.fem._mesh import UnitMesh
 from workflow.fem._overlap import overlap_measures
 from workflow.fem._solve import DEFAULT_SOLVER, Model, solve_path
@@ -30,6 +29,7 @@ from workflow.fem._unit import (
     DEFAULT_FORMULATION,
     contact_penalty,
     material_constants,
+    self_contact_pairs,
     solid_assembler,
 )
 from workflow.fem.finger2d import DeadLoad
@@ -92,20 +92,8 @@ def actuator_model(
     fixed = [(dim * um.nodes["clamp"][:, None] + np.arange(dim)).ravel()]
     if dim == 3:
         fixed.append(dim * um.nodes["symmetry"] + 2)
-    copts = dict(DEFAULT_CONTACT)
-    copts.update(dict(contact_options or {}))
-    pairs = (
-        contact_pairs_from_mesh(
-            um,
-            copts["search_mm"],
-            copts["extend"],
-            copts["smoothing_mm"],
-            friction=copts["friction"],
-            friction_penalty_factor=copts["friction_penalty_factor"],
-        )
-        if contact
-        else []
-    )
+    copts = {**DEFAULT_CONTACT, **dict(contact_options or {})}
+    pairs = self_contact_pairs(um, copts) if contact else []
     return Model(
         solid,
         pressures=group_pressures(um, pressures_kpa),

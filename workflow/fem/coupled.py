@@ -44,11 +44,17 @@ import numpy as np
 import skfem
 
 from workflow.fem._assembly import SolidAssembler
-from workflow.fem._contact import ContactPair, contact_pairs_from_mesh, tributary_areas
+from workflow.fem._contact import ContactPair, tributary_areas
 from workflow.fem._mesh import UnitMesh
 from workflow.fem._overlap import overlap_measures
 from workflow.fem._solve import DEFAULT_SOLVER, Model, solve_path
-from workflow.fem._unit import DEFAULT_CONTACT, DEFAULT_FORMULATION, contact_penalty, solid_assembler
+from workflow.fem._unit import (
+    DEFAULT_CONTACT,
+    DEFAULT_FORMULATION,
+    contact_penalty,
+    self_contact_pairs,
+    solid_assembler,
+)
 from workflow.fem.actuator import backbone_curve, group_pressures, tip_angle_deg
 from workflow.fem.finger2d import (
     BONE,
@@ -271,14 +277,7 @@ def coupled_model(
         extras.append(hand)
     if setup.gravity is not None:
         extras.append(DeadLoad(setup.gravity, ramp=gravity_ramp))
-    pairs = contact_pairs_from_mesh(
-        cm.um,
-        c["search_mm"],
-        c["extend"],
-        c["smoothing_mm"],
-        friction=c.get("friction", 0.0),
-        friction_penalty_factor=c.get("friction_penalty_factor", 0.1),
-    )
+    pairs = self_contact_pairs(cm.um, c)
     skin, bottom = cm.um.facets["finger_dorsal"], cm.um.facets["outer_bottom"]
     fac = float(c["finger_penalty"]) / eps  # own penalty (see the module docstring)
     finger_pairs = [
