@@ -50,6 +50,22 @@ __all__ = ["ContactPair", "contact_pairs_from_mesh"]
 _XI = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
 
 
+def _bilinear(ab: np.ndarray):
+    """Bilinear shape functions N and their derivatives dN/dxi, dN/deta (..., 4) at parameters ab (..., 2)."""
+    xi, eta = ab[..., 0, None], ab[..., 1, None]
+    N = 0.25 * (1 + _XI[:, 0] * xi) * (1 + _XI[:, 1] * eta)
+    return N, 0.25 * _XI[:, 0] * (1 + _XI[:, 1] * eta), 0.25 * _XI[:, 1] * (1 + _XI[:, 0] * xi)
+
+
+def _tangent_step(a1: np.ndarray, a2: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Parameter step (..., 2) whose move along the surface tangents a1, a2 best matches the vector r (least squares)."""
+    M = np.stack(
+        [np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1), np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1)], -2
+    )
+    rhs = np.stack([(r * a1).sum(-1), (r * a2).sum(-1)], -1)
+    return np.linalg.solve(M, rhs[..., None])[..., 0]
+
+
 def _window(t: np.ndarray) -> np.ndarray:
     """C1 smoothstep on [0, 1] (0 below, 1 above)."""
     t = np.clip(t, 0.0, 1.0)
@@ -314,10 +330,10 @@ class ContactPair:
         )
         self._pad = np.where(np.arange(width)[None, :] >= np.array([q.size for q in pools])[:, None], 1e9, 0.0)
         self.search = search
-        # Coulomb friction (2D; mu = 0: none): per slave the master point it sticks to, as (facet, xi), set at
-        # the accepted step where it came into contact (`commit`); -1 = none
+        # Coulomb friction (mu = 0: none): per slave the master point it sticks to, as (facet, parameters), set
+        # at the accepted step where it came into contact (`commit`); -1 = none
         self.mu = 0.0
-        self.friction_factor = 1.0
+        self.friction_factor = 0.1
         self.anchor_facet = -np.ones(self.slave.size, dtype=np.int64)
         self.anchor_xi = np.zeros((self.slave.size, 2))
         # allowed parameter range per master facet: [0, 1] (2D) / [-1, 1]^2 (3D), widened at free edges
@@ -362,23 +378,12 @@ class ContactPair:
         X = xm[cand]  # (ns, k, 4, 3)
         ab = np.zeros(cand.shape + (2,))
         for _ in range(8):
-            N = 0.25 * (1 + _XI[:, 0] * ab[..., 0, None]) * (1 + _XI[:, 1] * ab[..., 1, None])
-            dxi = 0.25 * _XI[:, 0] * (1 + _XI[:, 1] * ab[..., 1, None])
-            deta = 0.25 * _XI[:, 1] * (1 + _XI[:, 0] * ab[..., 0, None])
+            N, dxi, deta = _bilinear(ab)
             xp = np.einsum("ska,skai->ski", N, X)
             a1 = np.einsum("ska,skai->ski", dxi, X)
             a2 = np.einsum("ska,skai->ski", deta, X)
-            r = xs[:, None, :] - xp
-            M = np.stack(
-                [
-                    np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1),
-                    np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1),
-                ],
-                -2,
-            )
-            rhs = np.stack([(r * a1).sum(-1), (r * a2).sum(-1)], -1)
-            ab = np.clip(ab + np.linalg.solve(M, rhs[..., None])[..., 0], -3.0, 3.0)
-        N = 0.25 * (1 + _XI[:, 0] * ab[..., 0, None]) * (1 + _XI[:, 1] * ab[..., 1, None])
+            ab = np.clip(ab + _tangent_step(a1, a2, xs[:, None, :] - xp), -3.0, 3.0)
+        N = _bilinear(ab)[0]
         xp = np.einsum("ska,skai->ski", N, X)
         nrm = np.cross(a1, a2)
         nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
@@ -388,7 +393,7 @@ class ContactPair:
         # closest facet = smallest distance to the projection clipped onto the facet itself
         # (as in 2D), so that an edge facet's extension never wins over the facet a slave is on
         abc = np.clip(ab, -1.0, 1.0)
-        Nc = 0.25 * (1 + _XI[:, 0] * abc[..., 0, None]) * (1 + _XI[:, 1] * abc[..., 1, None])
+        Nc = _bilinear(abc)[0]
         dist = np.linalg.norm(xs[:, None, :] - np.einsum("ska,skai->ski", Nc, X), axis=-1)
         j = np.argmin(dist, axis=1)
         s = np.arange(xs.shape[0])
@@ -455,24 +460,11 @@ class ContactPair:
         else:
             ab = np.zeros((X.shape[0], 2))
             for _ in range(10):
-                N = 0.25 * (1 + _XI[:, 0] * ab[:, 0, None]) * (1 + _XI[:, 1] * ab[:, 1, None])
-                dxi = 0.25 * _XI[:, 0] * (1 + _XI[:, 1] * ab[:, 1, None])
-                deta = 0.25 * _XI[:, 1] * (1 + _XI[:, 0] * ab[:, 0, None])
+                N, dxi, deta = _bilinear(ab)
                 a1 = np.einsum("ca,cai->ci", dxi, xm)
                 a2 = np.einsum("ca,cai->ci", deta, xm)
-                r = xs - np.einsum("ca,cai->ci", N, xm)
-                M = np.stack(
-                    [
-                        np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1),
-                        np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1),
-                    ],
-                    -2,
-                )
-                rhs = np.stack([(r * a1).sum(-1), (r * a2).sum(-1)], -1)
-                ab = ab + np.linalg.solve(M, rhs[..., None])[..., 0]
-            N = 0.25 * (1 + _XI[:, 0] * ab[:, 0, None]) * (1 + _XI[:, 1] * ab[:, 1, None])
-            dxi = 0.25 * _XI[:, 0] * (1 + _XI[:, 1] * ab[:, 1, None])
-            deta = 0.25 * _XI[:, 1] * (1 + _XI[:, 0] * ab[:, 0, None])
+                ab = ab + _tangent_step(a1, a2, xs - np.einsum("ca,cai->ci", N, xm))
+            N, dxi, deta = _bilinear(ab)
             n = np.cross(np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm))
             n /= np.linalg.norm(n, axis=1, keepdims=True)
             (L,) = lim  # (nc, 2 directions, lo/hi)
@@ -499,7 +491,7 @@ class ContactPair:
         """Shape functions (nc, 2 or 4) of the anchor facet at its parameters xi0 (nc, 2)."""
         if self.dim == 2:
             return np.stack([1.0 - xi0[:, 0], xi0[:, 0]], axis=1)
-        return 0.25 * (1 + _XI[:, 0] * xi0[:, 0, None]) * (1 + _XI[:, 1] * xi0[:, 1, None])
+        return _bilinear(xi0)[0]
 
     def _friction_terms(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple, xi0: np.ndarray):
         """Normal force fn (nc, 5 dim), normal n, normal force magnitude pn, anchor weights W and the slave's
@@ -553,10 +545,10 @@ class ContactPair:
         anchor = np.where(has[:, None], self.master[np.maximum(af, 0)], own)
         return np.concatenate([nodes, anchor], axis=1), lim, has, np.where(has[:, None], self.anchor_xi[idx], 0.0)
 
-    def _parameters(self, x: np.ndarray, m: np.ndarray, N: np.ndarray) -> np.ndarray:
-        """Facet parameters (k, 2) of projections with shape functions N on facets m (2D: (xi, 0))."""
+    def _parameters(self, N: np.ndarray) -> np.ndarray:
+        """Facet parameters (k, 2) of projections with shape functions N (2D: (xi, 0); 3D: sum_a N_a (xi_a, eta_a))."""
         if self.dim == 2:
-            return np.stack([N[:, 1], np.zeros(len(m))], axis=1)
+            return np.stack([N[:, 1], np.zeros(len(N))], axis=1)
         return N @ _XI
 
     def commit(self, x: np.ndarray, eps: float) -> None:
@@ -565,7 +557,7 @@ class ContactPair:
             return
         m, N, n, g, inside = self._project(x)
         act = inside & (np.abs(g) <= self.search) & (g < self.smoothing)
-        param = self._parameters(x, m, N)
+        param = self._parameters(N)
         new = act & (self.anchor_facet < 0)
         self.anchor_facet[new], self.anchor_xi[new] = m[new], param[new]
         self.anchor_facet[~act] = -1
@@ -590,18 +582,9 @@ class ContactPair:
             self.anchor_xi[k] = np.stack([np.clip(p1, 0.0, 1.0), np.zeros_like(p1)], axis=1)
         else:
             xm = X[slip, 1:5]
-            dxi = 0.25 * _XI[:, 0] * (1 + _XI[:, 1] * p0[:, 1, None])
-            deta = 0.25 * _XI[:, 1] * (1 + _XI[:, 0] * p0[:, 0, None])
+            _, dxi, deta = _bilinear(p0)
             a1, a2 = np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm)
-            M = np.stack(
-                [
-                    np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1),
-                    np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1),
-                ],
-                -2,
-            )
-            rhs = np.stack([(delta * a1).sum(-1), (delta * a2).sum(-1)], -1)
-            self.anchor_xi[k] = np.clip(p0 + np.linalg.solve(M, rhs[..., None])[..., 0], -1.0, 1.0)
+            self.anchor_xi[k] = np.clip(p0 + _tangent_step(a1, a2, delta), -1.0, 1.0)
         self.anchor_facet[k] = m[k]
 
     def evaluate(self, x: np.ndarray, eps: float, tangent: bool = True):

@@ -447,7 +447,6 @@ def _chain_mesh(
                 facets[f"cavity_{side}_{name}"] = faces[sel]
             facets[f"outer_{side}"] = faces[np.abs(ys - yt) < tol]
         nodes["backbone"] = np.flatnonzero(paper)
-    fillet = float(g.get("fillet", 0.0))
     if fillet > 0.0:
         # the blocks' outer corners, both sides; every set above was selected on the square geometry
         blocks = [(k * (d + gap), k * (d + gap) + d) for k in range(n)]

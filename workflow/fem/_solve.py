@@ -419,6 +419,7 @@ def solve_path(
     else:
         u = np.concatenate([np.asarray(u0, float), np.zeros(model.nstate - model.n)])
     u_prev, u_start = u.copy(), u.copy()
+    frictional = [pair for pair in model.contacts if pair.mu > 0.0]
     lam, dlam, dlam_prev = 0.0, float(opts["initial_step"]), 0.0
     history, iters, steps, cuts = [], 0, 0, 0
     status, reason = 0, ""
@@ -451,9 +452,10 @@ def solve_path(
         if ok:
             u_prev, u = u, u_new
             lam, dlam_prev = target, target - lam
-            for pair in model.contacts:  # path-dependent contact state (friction anchors) moves on with the path
-                if getattr(pair, "mu", 0.0) > 0.0:
-                    pair.commit(model.positions(u, p_ref), model.penalty)
+            if frictional:  # path-dependent contact state (friction anchors) moves on with the path
+                x_acc = model.positions(u, p_ref)
+                for pair in frictional:
+                    pair.commit(x_acc, model.penalty)
             rec = {
                 "lam": lam,
                 "iterations": its,
