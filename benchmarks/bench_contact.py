@@ -11,6 +11,8 @@ Parts (P_B = 0, P_T = 60/180/300 kPa, plane strain, per unit, full 20 mm width):
 * ``normals``: smoothed (default) against facet master normals at h = 0.5 mm
   over several step sequences (the former stall depends on where the steps
   land) -> ``contact_normals.csv``.
+* ``normals3d``: the 3D unit (P_B = 0, first attempt, no restarts) with smoothed (default) against facet master
+  normals, free and blocked rays, both in one run -> ``contact_normals3d.csv``.
 * ``felupe``: FElupe with its own contact (``SmoothedGapContact`` of
   tests/_felupe_unit.py, on the same contact surfaces) against ours with the
   same element technology (``formulation="mixed"``) on the same mesh, free
@@ -199,6 +201,28 @@ def normals(h: float = 0.5) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def normals3d(hs, cases=("free", "blocked")) -> pd.DataFrame:
+    """3D unit rays with smoothed and with facet master normals (the solver's defaults, first attempt)."""
+    rows = []
+    for h in hs:
+        um = fem.build_unit_mesh(h=h, dim=3)
+        for case in cases:
+            for smooth in (True, False):
+                res = fem.solve_unit(
+                    um,
+                    P_KPA[-1],
+                    0.0,
+                    case,
+                    True,
+                    contact_options={"smooth_normals": smooth},
+                    stops=tuple(P_KPA / P_KPA[-1]),
+                )
+                hold = fem.DEFAULT_END_HOLD if case == "blocked" else ""  # the engine's, as the sweeps
+                rows.append(_row(res, h, smooth_normals=smooth, end_hold=hold))
+                print(pd.Series(rows[-1]).to_dict(), flush=True)
+    return pd.DataFrame(rows)
+
+
 def felupe_check(hs) -> pd.DataFrame:
     """Free angles (total, deg) of both codes with contact on the same mesh; ours (mixed) first, then FElupe."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -242,10 +266,11 @@ def felupe_check(hs) -> pd.DataFrame:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--parts", default="convergence,penalty,normals,felupe")
+    ap.add_argument("--parts", default="convergence,penalty,normals,normals3d,felupe")
     ap.add_argument("--h", default="2,1,0.5,0.25", help="element sizes (mm) of the convergence part")
     ap.add_argument("--felupe-h", default="1,0.5", help="element sizes (mm) of the FElupe part")
     ap.add_argument("--normals-h", default="0.5", help="element size (mm) of the normals part")
+    ap.add_argument("--normals3d-h", default="2", help="element sizes (mm) of the normals3d part")
     ap.add_argument(
         "--end-hold",
         default="backbone",
@@ -264,6 +289,8 @@ def main(argv=None):
         penalty().to_csv(OUT / "contact_penalty.csv", index=False)
     if "normals" in parts:
         normals(float(args.normals_h)).to_csv(OUT / "contact_normals.csv", index=False)
+    if "normals3d" in parts:
+        normals3d([float(v) for v in args.normals3d_h.split(",")]).to_csv(OUT / "contact_normals3d.csv", index=False)
     if "felupe" in parts:
         felupe_check([float(v) for v in args.felupe_h.split(",")]).to_csv(OUT / "contact_felupe.csv", index=False)
 

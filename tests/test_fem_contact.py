@@ -43,6 +43,52 @@ def test_smoothed_normal_is_continuous_across_a_master_node():
     assert np.abs(np.diff(plain[:, 1:3], axis=0)).max() > 0.3
 
 
+def _kinked_sheet(kink_deg=20.0):
+    """3D master: a 3 x 2 grid of facets, the x > 1 column turned down by the kink about the edge x = 1 (outward +y)."""
+    a = np.radians(kink_deg)
+    xs = [(-1.0, 0.0), (0.0, 0.0), (1.0, 0.0), (1.0 + np.cos(a), -np.sin(a))]
+    pts = np.array([[x, y, z] for z in (0.0, 1.0, 2.0) for x, y in xs])  # node = 4 z + i
+    facets = np.array(
+        [[4 * j + i, 4 * (j + 1) + i, 4 * (j + 1) + i + 1, 4 * j + i + 1] for j in (0, 1) for i in (0, 1, 2)]
+    )
+    return pts, facets
+
+
+def test_smoothed_normal_is_continuous_across_a_master_edge_in_3d():
+    pts, facets = _kinked_sheet(20.0)
+    xs = np.linspace(0.8, 1.2, 401)
+    out = {}
+    for smooth in (True, False):
+        p = np.concatenate([pts, [[0.9, 0.02, 1.0], [0.9, 0.02, 1.2], [0.95, 0.02, 1.1], [0.85, 0.02, 1.1]]]).T
+        pair = ContactPair(p, np.array([[12, 13, 14, 15]]), facets, extend=0.0, smooth_normals=smooth)
+        rows = []
+        for x0 in xs:
+            x = p.copy()
+            x[:, pair.slave] = np.array([[x0], [-0.02], [1.0 + 0.3 * (x0 - 1.0) + 0.37]])[:, [0] * pair.slave.size]
+            _, _, n, g, inside = pair._project(x)
+            rows.append(np.concatenate([[g[0]], n[0], [inside[0]]]))
+        out[smooth] = np.array(rows)
+    assert out[True][:, 4].all()
+    # the interpolated normal turns gradually across the edge at x = 1 ...
+    assert np.abs(np.diff(out[True][:, 1:4], axis=0)).max() < 0.01
+    assert np.abs(np.diff(out[True][:, 0])).max() < 1e-3
+    # ... whereas the facet normal jumps by the kink (20 deg: |dn| = 2 sin 10 deg = 0.35)
+    assert np.abs(np.diff(out[False][:, 1:4], axis=0)).max() > 0.3
+
+
+def test_a_slave_just_past_a_ridge_pairs_with_the_facet_its_smoothed_normal_reaches():
+    """Along smoothed normals the projection is not the closest point: a slave 2 um past the ridge of a convex
+    edge (20 deg) projects into the near facet, while the clipped point of the facet beyond is nearer by a hair;
+    the facet it projects into must win (else the slave counts as outside every facet and drops out of contact)."""
+    pts, facets = _kinked_sheet(20.0)
+    p = np.concatenate([pts, [[1.002, 0.02, 1.5], [1.002, 0.02, 1.6], [1.1, 0.02, 1.6], [1.1, 0.02, 1.5]]]).T
+    pair = ContactPair(p, np.array([[12, 13, 14, 15]]), facets, extend=0.0)
+    m, _, _, g, inside = pair._project(p)
+    k = int(np.flatnonzero(pair.slave == 12)[0])
+    assert inside[k] and m[k] in (1, 4)  # the x in (0, 1) column, not the turned-down one
+    assert g[k] == pytest.approx(0.02, rel=0.02)
+
+
 def test_segment_projection_reduces_to_the_closest_point_on_a_straight_wall():
     X = np.array([[[0.3, -0.1], [0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [2.0, 0.0]]])
     xi, n, g = _segment_2d(X, np.array([True]), np.array([True]))

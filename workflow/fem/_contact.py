@@ -29,6 +29,16 @@ force are then continuous as a slave crosses a master node (a standard fix,
 e.g. Wriggers, Computational Contact Mechanics, ch. 9 on smoothing).  The
 force is not the gradient of a potential any more (the tangent is not
 symmetric); Newton uses its exact finite-difference tangent.
+In 3D the same (``smooth_normals``): the nodal normal at a facet's corner is the
+mean of the unit normals of the facets of the same part around the node (a
+pocket's wall and floor keep their edge), n(xi, eta) = sum_a N_a n_a normalised,
+and the slave is projected along it: x(xi, eta) + gamma n(xi, eta) = x_s, three
+equations solved by Newton from the orthogonal projection.  A slave's local node
+set is then the facet's nodes and every node of the facets around them (up to
+16 on a grid), so that the tangent includes the turning of the nodal normals.
+Smoothing removes the normal's jump across an edge, not the kink of the
+bilinear shape functions there (a slave on a master edge moves its force
+between the edge's nodes and the next ones at a rate that jumps).
 
 Friction (``mu`` > 0; frictionless by default, as the paper's Marc model): regularised Coulomb.  A slave
 that comes into contact sticks, at the end of that load step (``commit``), to the master point it touches, as
@@ -125,6 +135,48 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
+def _nodal_normals_3d(Xadj: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Unit nodal normals (..., 4, 3) of a facet's corners: the mean of the unit normals of the facets around each.
+
+    Xadj (..., 4 corners, K facets, 4 nodes, 3) their node positions (mm), mask (..., 4, K) which are real.  A
+    bilinear facet's normal at its centre is along the cross product of its diagonals.
+    """
+    nf = _unit(np.cross(Xadj[..., 2, :] - Xadj[..., 0, :], Xadj[..., 3, :] - Xadj[..., 1, :]))
+    return _unit((nf * mask[..., None]).sum(axis=-2))
+
+
+def _smooth_projection_3d(xs: np.ndarray, xm: np.ndarray, nn: np.ndarray, ab: np.ndarray, iters: int = 6):
+    """Projection of slaves xs (..., 3) onto facets xm (..., 4, 3) along the interpolated normal (3D).
+
+    The normal field of the facet is n(ab) = sum_a N_a(ab) n_a over its nodal normals nn (..., 4, 3), held at its
+    edge value past the facet (as the 2D segment's past a free edge).  Newton on x(ab) + gamma n(ab) = xs from the
+    orthogonal projection ``ab``.  Returns the parameters (..., 2), unit normal (..., 3) and gap (..., ) in mm.
+    """
+    nhat = np.einsum("...a,...ai->...i", _bilinear(np.clip(ab, -1.0, 1.0))[0], nn)
+    N = _bilinear(ab)[0]
+    gam = np.einsum("...i,...i->...", xs - np.einsum("...a,...ai->...i", N, xm), nhat) / np.einsum(
+        "...i,...i->...", nhat, nhat
+    )
+    for _ in range(iters):
+        N, dxi, deta = _bilinear(ab)
+        abc = np.clip(ab, -1.0, 1.0)
+        Nc, dxic, detac = _bilinear(abc)
+        on = (np.abs(ab) <= 1.0).astype(float)  # the normal's parameter derivative is zero where it is held
+        nhat = np.einsum("...a,...ai->...i", Nc, nn)
+        dn1 = np.einsum("...a,...ai->...i", dxic, nn) * on[..., :1]
+        dn2 = np.einsum("...a,...ai->...i", detac, nn) * on[..., 1:]
+        r = np.einsum("...a,...ai->...i", N, xm) + gam[..., None] * nhat - xs
+        a1 = np.einsum("...a,...ai->...i", dxi, xm) + gam[..., None] * dn1
+        a2 = np.einsum("...a,...ai->...i", deta, xm) + gam[..., None] * dn2
+        J = np.stack([a1, a2, nhat], axis=-1)
+        step = np.linalg.solve(J, -r[..., None])[..., 0]
+        ab = np.clip(ab + step[..., :2], -3.0, 3.0)
+        gam = gam + step[..., 2]
+    n = _unit(np.einsum("...a,...ai->...i", _bilinear(np.clip(ab, -1.0, 1.0))[0], nn))
+    g = np.einsum("...i,...i->...", xs - np.einsum("...a,...ai->...i", _bilinear(ab)[0], xm), n)
+    return ab, n, g
+
+
 def _segment_2d(X: np.ndarray, has_prev: np.ndarray, has_next: np.ndarray):
     """Projection of slaves onto master segments along the interpolated normal.
 
@@ -213,8 +265,9 @@ class ContactPair:
         pressure rises smoothly from 0 at g = d to eps d/2 at g = 0 and then
         linearly, eps (d/2 - g).  d = 0 is the plain (C0) penalty.
     smooth_normals : bool
-        2D only: interpolate the master normal between nodal normals (continuous
-        across master nodes); False = each facet's own normal (kinks at nodes).
+        Interpolate the master normal between nodal normals (continuous across
+        master nodes in 2D, nodes and edges in 3D); False = each facet's own
+        normal (kinks at nodes and edges).
     penalty_factor : float
         This pair's penalty is ``penalty_factor`` times the eps passed to
         ``evaluate`` (the model's), e.g. a softer contact with flesh.
@@ -363,6 +416,45 @@ class ContactPair:
                 ],
                 axis=1,
             )  # (nm, 2 directions, lo/hi)
+            if self.smooth_normals:
+                self._setup_nodal_normals_3d(master_part)
+
+    def _setup_nodal_normals_3d(self, master_part) -> None:
+        """3D: per master facet and corner the facets whose normals average to that corner's nodal normal.
+
+        The facets around the corner node of the same part (a block's wall and floor keep their edge), as global
+        ids ``_adj`` (nm, 4, K) with ``_adj_mask``, and the facet's stencil: its own four nodes first, then every
+        other node of those facets (``_patch`` (nm, W), padded with its first node), with ``_adj_local``
+        (nm, 4, K, 4) the adjacent facets' nodes as positions in the local node set (slave first, so 1 + patch
+        index).
+        """
+        mf = self.master
+        part = np.zeros(mf.shape[0], np.int64) if master_part is None else np.asarray(master_part)
+        star: dict[tuple, list] = {}
+        for k, f in enumerate(mf):
+            for a in f:
+                star.setdefault((int(a), int(part[k])), []).append(k)
+        K = max(len(v) for v in star.values())
+        adj = np.repeat(np.arange(mf.shape[0])[:, None, None], 4, axis=1).repeat(K, axis=2)
+        mask = np.zeros(adj.shape, bool)
+        patches = []
+        for k, f in enumerate(mf):
+            nodes = [int(a) for a in f]
+            for c, a in enumerate(f):
+                around = star[(int(a), int(part[k]))]
+                adj[k, c, : len(around)] = around
+                mask[k, c, : len(around)] = True
+                for j in around:
+                    nodes += [int(b) for b in mf[j] if int(b) not in nodes]
+            patches.append(nodes)
+        W = max(len(q) for q in patches)
+        self._patch = np.array([q + [q[0]] * (W - len(q)) for q in patches], np.int64)
+        pos = [{a: i + 1 for i, a in reversed(list(enumerate(q)))} for q in self._patch.tolist()]
+        self._adj, self._adj_mask = adj, mask
+        self._adj_local = np.array(
+            [[[[pos[k][int(b)] for b in mf[j]] for j in adj[k, c]] for c in range(4)] for k in range(mf.shape[0])],
+            np.int64,
+        )
 
     def _project(self, x: np.ndarray):
         """Closest master facet per slave: (facet index, N (ns, nfn), n (ns, dim), g (ns,), inside)."""
@@ -383,19 +475,27 @@ class ContactPair:
             a1 = np.einsum("ska,skai->ski", dxi, X)
             a2 = np.einsum("ska,skai->ski", deta, X)
             ab = np.clip(ab + _tangent_step(a1, a2, xs[:, None, :] - xp), -3.0, 3.0)
-        N = _bilinear(ab)[0]
-        xp = np.einsum("ska,skai->ski", N, X)
-        nrm = np.cross(a1, a2)
-        nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
-        g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
+        if self.smooth_normals:
+            xa = x[:, self.master[self._adj]].transpose(1, 2, 3, 4, 0)  # (nm, 4, K, 4, 3)
+            nn = _nodal_normals_3d(xa, self._adj_mask)[cand]  # (ns, k, 4, 3)
+            ab, nrm, g = _smooth_projection_3d(np.broadcast_to(xs[:, None, :], X.shape[:2] + (3,)), X, nn, ab)
+            N = _bilinear(ab)[0]
+        else:
+            N = _bilinear(ab)[0]
+            xp = np.einsum("ska,skai->ski", N, X)
+            nrm = np.cross(a1, a2)
+            nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+            g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
         lim = self.lim[cand]  # (ns, k, 2, 2)
         inside = np.all((ab >= lim[..., 0] - 1e-6) & (ab <= lim[..., 1] + 1e-6), axis=-1)
-        # closest facet = smallest distance to the projection clipped onto the facet itself
-        # (as in 2D), so that an edge facet's extension never wins over the facet a slave is on
+        # as in 2D: facets whose (extended) range holds the projection first, then the one nearest to the
+        # projection clipped onto the facet itself, so that an edge facet's extension never wins over the facet a
+        # slave is on (along smoothed normals the projection is not the closest point: a slave on an edge can be
+        # nearer, by a hair, to the neighbour it does not project into)
         abc = np.clip(ab, -1.0, 1.0)
         Nc = _bilinear(abc)[0]
         dist = np.linalg.norm(xs[:, None, :] - np.einsum("ska,skai->ski", Nc, X), axis=-1)
-        j = np.argmin(dist, axis=1)
+        j = np.argmin(np.where(inside, dist, dist + 1e6), axis=1)
         s = np.arange(xs.shape[0])
         return cand[s, j], N[s, j], nrm[s, j], g[s, j], inside[s, j]
 
@@ -458,16 +558,22 @@ class ContactPair:
             w = np.where((xi < 0) & (lo < 0), _window((xi - lo) / np.maximum(-lo, 1e-12)), 1.0)
             w = w * np.where((xi > 1) & (hi > 1), _window((hi - xi) / np.maximum(hi - 1.0, 1e-12)), 1.0)
         else:
+            xm = X[:, 1:5]  # the facet's own nodes; with smoothed normals the rest of the stencil turns them
             ab = np.zeros((X.shape[0], 2))
             for _ in range(10):
                 N, dxi, deta = _bilinear(ab)
                 a1 = np.einsum("ca,cai->ci", dxi, xm)
                 a2 = np.einsum("ca,cai->ci", deta, xm)
                 ab = ab + _tangent_step(a1, a2, xs - np.einsum("ca,cai->ci", N, xm))
-            N, dxi, deta = _bilinear(ab)
-            n = np.cross(np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm))
-            n /= np.linalg.norm(n, axis=1, keepdims=True)
-            (L,) = lim  # (nc, 2 directions, lo/hi)
+            if len(lim) == 3:  # smoothed normals: (limits, adjacent facets' local nodes, their mask)
+                Xadj = X[np.arange(X.shape[0])[:, None, None, None], lim[1]]
+                ab, n, _ = _smooth_projection_3d(xs, xm, _nodal_normals_3d(Xadj, lim[2]), ab)
+                N = _bilinear(ab)[0]
+            else:
+                N, dxi, deta = _bilinear(ab)
+                n = np.cross(np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm))
+                n /= np.linalg.norm(n, axis=1, keepdims=True)
+            L = lim[0]  # (nc, 2 directions, lo/hi)
             lo, hi = L[..., 0], L[..., 1]
             # the penalty fades to 0 across the widened range past a free edge (continuous as a slave slides off)
             w = np.prod(
@@ -476,7 +582,9 @@ class ContactPair:
                 axis=1,
             )
         g = np.einsum("ci,ci->c", xs - np.einsum("ca,cai->ci", N, xm), n)
-        coef = np.concatenate([np.ones((X.shape[0], 1)), -N], axis=1)
+        coef = np.zeros(X.shape[:2])  # stencil nodes past the facet's own only turn the normal: no force
+        coef[:, 0] = 1.0
+        coef[:, 1 : 1 + N.shape[1]] = -N
         dg = (coef[:, :, None] * n[:, None, :]).reshape(X.shape[0], -1)
         d = self.smoothing
         # C1 penalty: linear eps (g - d/2) in penetration, -eps (d - g)^2 / (2 d) for 0 < g < d, 0 beyond
@@ -496,11 +604,12 @@ class ContactPair:
     def _friction_terms(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple, xi0: np.ndarray):
         """Normal force fn (nc, 5 dim), normal n, normal force magnitude pn, anchor weights W and the slave's
         tangential offset dt (mm) from its anchor, for node sets X = slave, current facet (4 nodes), anchor facet."""
-        fn, n = self._local_force(X[:, :5], eps_area, lim, return_normal=True)
+        n0 = X.shape[1] - (2 if self.dim == 2 else 4)
+        fn, n = self._local_force(X[:, :n0], eps_area, lim, return_normal=True)
         d = self.dim
         pn = np.abs(np.einsum("ci,ci->c", fn[:, :d], n))  # the slave's share of the penalty force
         W = self._anchor_weights(xi0)
-        dv = X[:, 0] - np.einsum("ca,cai->ci", W, X[:, 5:])
+        dv = X[:, 0] - np.einsum("ca,cai->ci", W, X[:, n0:])
         dt = dv - np.einsum("ci,ci->c", dv, n)[:, None] * n
         return fn, n, pn, W, dt
 
@@ -518,10 +627,11 @@ class ContactPair:
         cap = self.mu * pn
         ft = ft * np.where(mag > cap, cap / np.maximum(mag, 1e-300), 1.0)[:, None]
         d = self.dim
+        n0 = fn.shape[1] // d
         f = np.zeros((X.shape[0], X.shape[1] * d))
-        f[:, : 5 * d] = fn
+        f[:, : n0 * d] = fn
         f[:, :d] += ft
-        f[:, 5 * d :] -= (W[:, :, None] * ft[:, None, :]).reshape(X.shape[0], -1)
+        f[:, n0 * d :] -= (W[:, :, None] * ft[:, None, :]).reshape(X.shape[0], -1)
         return f
 
     def _friction_on(self) -> bool:
@@ -533,6 +643,10 @@ class ContactPair:
             nodes = np.concatenate([self.slave[idx, None], self._nodes_2d(m)], axis=1)
             lim = (self.lo[m], self.hi[m], self.prev[m] >= 0, self.next[m] >= 0)
             own = nodes[:, 1:3]
+        elif self.smooth_normals:  # slave, the facet's nodes, then the nodes that set its nodal normals
+            nodes = np.concatenate([self.slave[idx, None], self._patch[m]], axis=1)
+            lim = (self.lim[m], self._adj_local[m], self._adj_mask[m])
+            own = nodes[:, 1:5]
         else:
             nodes = np.concatenate([self.slave[idx, None], self.master[m]], axis=1)
             lim = (self.lim[m],)
@@ -631,8 +745,9 @@ class ContactPair:
         f = self._local_friction(X, w, lim, xi0)
         if (~has).any():
             d = self.dim
-            f[~has, 5 * d :] = 0.0
-            f[~has, : 5 * d] = self._local_force(X[~has, :5], w[~has], tuple(a[~has] for a in lim))
+            n0 = X.shape[1] - (2 if d == 2 else 4)
+            f[~has, n0 * d :] = 0.0
+            f[~has, : n0 * d] = self._local_force(X[~has, :n0], w[~has], tuple(a[~has] for a in lim))
         return f
 
     def energy(self, x: np.ndarray, eps: float) -> float:

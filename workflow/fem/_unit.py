@@ -113,6 +113,7 @@ DEFAULT_CONTACT = {
     "smoothing_mm": 0.01,
     "friction": 0.0,  # Coulomb coefficient between silicone surfaces (0: frictionless, as the paper's Marc model)
     "friction_penalty_factor": 0.1,  # tangential penalty = this x the normal one (sticking slaves slip by t_T / eps_t)
+    "smooth_normals": True,  # master normals interpolated between nodal normals (continuous across nodes and edges)
 }
 
 
@@ -124,6 +125,7 @@ def self_contact_pairs(um: UnitMesh, contact_options: Mapping | None = None) -> 
         c["search_mm"],
         c["extend"],
         c["smoothing_mm"],
+        smooth_normals=c["smooth_normals"],
         friction=c["friction"],
         friction_penalty_factor=c["friction_penalty_factor"],
     )
