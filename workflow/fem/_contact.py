@@ -135,6 +135,17 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
+def _orthogonal_ab(xs: np.ndarray, xm: np.ndarray, iters: int = 10) -> np.ndarray:
+    """Parameters (nc, 2) of the closest point of bilinear facets xm (nc, 4, 3) to points xs (nc, 3), from the centre."""
+    ab = np.zeros((xs.shape[0], 2))
+    for _ in range(iters):
+        N, dxi, deta = _bilinear(ab)
+        a1 = np.einsum("ca,cai->ci", dxi, xm)
+        a2 = np.einsum("ca,cai->ci", deta, xm)
+        ab = ab + _tangent_step(a1, a2, xs - np.einsum("ca,cai->ci", N, xm))
+    return ab
+
+
 def _nodal_normals_3d(Xadj: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Unit nodal normals (..., 4, 3) of a facet's corners: the mean of the unit normals of the facets around each.
 
@@ -475,17 +486,21 @@ class ContactPair:
             a1 = np.einsum("ska,skai->ski", dxi, X)
             a2 = np.einsum("ska,skai->ski", deta, X)
             ab = np.clip(ab + _tangent_step(a1, a2, xs[:, None, :] - xp), -3.0, 3.0)
+        N = _bilinear(ab)[0]
+        xp = np.einsum("ska,skai->ski", N, X)
+        nrm = np.cross(a1, a2)
+        nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+        g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
         if self.smooth_normals:
-            xa = x[:, self.master[self._adj]].transpose(1, 2, 3, 4, 0)  # (nm, 4, K, 4, 3)
-            nn = _nodal_normals_3d(xa, self._adj_mask)[cand]  # (ns, k, 4, 3)
-            ab, nrm, g = _smooth_projection_3d(np.broadcast_to(xs[:, None, :], X.shape[:2] + (3,)), X, nn, ab)
-            N = _bilinear(ab)[0]
-        else:
-            N = _bilinear(ab)[0]
-            xp = np.einsum("ska,skai->ski", N, X)
-            nrm = np.cross(a1, a2)
-            nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
-            g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
+            # along smoothed normals only for slaves within twice the search radius of a candidate (the rest are
+            # out of reach either way): most slaves are far from every wall most of the time
+            near = np.flatnonzero(np.abs(g).min(axis=1) <= 2.0 * self.search)
+            if near.size:
+                xa = x[:, self.master[self._adj[cand[near]]]].transpose(1, 2, 3, 4, 5, 0)  # (nn, k, 4, K, 4, 3)
+                nn = _nodal_normals_3d(xa, self._adj_mask[cand[near]])
+                xsn = np.broadcast_to(xs[near, None, :], X[near].shape[:2] + (3,))
+                ab[near], nrm[near], g[near] = _smooth_projection_3d(xsn, X[near], nn, ab[near])
+                N = _bilinear(ab)[0]
         lim = self.lim[cand]  # (ns, k, 2, 2)
         inside = np.all((ab >= lim[..., 0] - 1e-6) & (ab <= lim[..., 1] + 1e-6), axis=-1)
         # as in 2D: facets whose (extended) range holds the projection first, then the one nearest to the
@@ -559,17 +574,11 @@ class ContactPair:
             w = w * np.where((xi > 1) & (hi > 1), _window((hi - xi) / np.maximum(hi - 1.0, 1e-12)), 1.0)
         else:
             xm = X[:, 1:5]  # the facet's own nodes; with smoothed normals the rest of the stencil turns them
-            ab = np.zeros((X.shape[0], 2))
-            for _ in range(10):
-                N, dxi, deta = _bilinear(ab)
-                a1 = np.einsum("ca,cai->ci", dxi, xm)
-                a2 = np.einsum("ca,cai->ci", deta, xm)
-                ab = ab + _tangent_step(a1, a2, xs - np.einsum("ca,cai->ci", N, xm))
-            if len(lim) == 3:  # smoothed normals: (limits, adjacent facets' local nodes, their mask)
-                Xadj = X[np.arange(X.shape[0])[:, None, None, None], lim[1]]
-                ab, n, _ = _smooth_projection_3d(xs, xm, _nodal_normals_3d(Xadj, lim[2]), ab)
+            if len(lim) >= 3:  # smoothed normals: (limits, adjacent facets' local nodes, their mask[, start])
+                ab, n = self._smooth_local_3d(X, lim)
                 N = _bilinear(ab)[0]
             else:
+                ab = _orthogonal_ab(xs, xm)
                 N, dxi, deta = _bilinear(ab)
                 n = np.cross(np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm))
                 n /= np.linalg.norm(n, axis=1, keepdims=True)
@@ -594,6 +603,19 @@ class ContactPair:
             t = np.minimum(g, 0.0)
         f = (eps_area * w * t)[:, None] * dg
         return (f, n) if return_normal else f
+
+    def _smooth_local_3d(self, X: np.ndarray, lim: tuple):
+        """Parameters (nc, 2) and unit normal (nc, 3) of slaves X[:, 0] on their facets along smoothed normals.
+
+        With a fourth entry in ``lim`` (the parameters found at the unperturbed node set), Newton starts there and
+        takes three iterations: the finite-difference copies lie 1e-7 mm away, so they converge to round-off.
+        """
+        xs, xm = X[:, 0], X[:, 1:5]
+        warm = len(lim) == 4
+        ab = lim[3] if warm else _orthogonal_ab(xs, xm)
+        Xadj = X[np.arange(X.shape[0])[:, None, None, None], lim[1]]
+        ab, n, _ = _smooth_projection_3d(xs, xm, _nodal_normals_3d(Xadj, lim[2]), ab, iters=3 if warm else 6)
+        return ab, n
 
     def _anchor_weights(self, xi0: np.ndarray) -> np.ndarray:
         """Shape functions (nc, 2 or 4) of the anchor facet at its parameters xi0 (nc, 2)."""
@@ -724,6 +746,8 @@ class ContactPair:
         dofs = (dim * nodes[:, :, None] + np.arange(dim)).reshape(nodes.shape[0], -1)
         K = None
         if tangent:
+            if dim == 3 and len(lim) == 3:  # the copies' projections start from the unperturbed one
+                lim = lim + (self._smooth_local_3d(X, lim)[0],)
             # all 2*nd perturbed copies in one vectorised batch
             nc, nd = f.shape
             step = 1e-7 * max(1.0, float(np.abs(X).max()))
