@@ -33,7 +33,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from workflow import fem
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without the editable install
+
+from workflow import fem  # noqa: E402
 from workflow.fem._contact import contact_pairs_from_mesh
 from workflow.fem._solve import DEFAULT_SOLVER, solve_path
 from workflow.fem._unit import _measure_factory
