@@ -146,13 +146,15 @@ def _orthogonal_ab(xs: np.ndarray, xm: np.ndarray, iters: int = 10) -> np.ndarra
     return ab
 
 
-def _nodal_normals_3d(Xadj: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Unit nodal normals (..., 4, 3) of a facet's corners: the mean of the unit normals of the facets around each.
+def _facet_normals_3d(Xf: np.ndarray) -> np.ndarray:
+    """Unit normals (..., 3) of bilinear facets Xf (..., 4, 3) at their centres: along the cross product of the
+    diagonals."""
+    return _unit(np.cross(Xf[..., 2, :] - Xf[..., 0, :], Xf[..., 3, :] - Xf[..., 1, :]))
 
-    Xadj (..., 4 corners, K facets, 4 nodes, 3) their node positions (mm), mask (..., 4, K) which are real.  A
-    bilinear facet's normal at its centre is along the cross product of its diagonals.
-    """
-    nf = _unit(np.cross(Xadj[..., 2, :] - Xadj[..., 0, :], Xadj[..., 3, :] - Xadj[..., 1, :]))
+
+def _nodal_normals_3d(nf: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Unit nodal normals (..., 4, 3) of a facet's corners: the mean of the unit normals nf (..., 4, K, 3) of the K
+    facets around each corner, of which mask (..., 4, K) says which are real."""
     return _unit((nf * mask[..., None]).sum(axis=-2))
 
 
@@ -496,8 +498,8 @@ class ContactPair:
             # out of reach either way): most slaves are far from every wall most of the time
             near = np.flatnonzero(np.abs(g).min(axis=1) <= 2.0 * self.search)
             if near.size:
-                xa = x[:, self.master[self._adj[cand[near]]]].transpose(1, 2, 3, 4, 5, 0)  # (nn, k, 4, K, 4, 3)
-                nn = _nodal_normals_3d(xa, self._adj_mask[cand[near]])
+                nodal = _nodal_normals_3d(_facet_normals_3d(xm)[self._adj], self._adj_mask)  # (nm, 4, 3)
+                nn = nodal[cand[near]]
                 xsn = np.broadcast_to(xs[near, None, :], X[near].shape[:2] + (3,))
                 ab[near], nrm[near], g[near] = _smooth_projection_3d(xsn, X[near], nn, ab[near])
                 N = _bilinear(ab)[0]
@@ -608,13 +610,14 @@ class ContactPair:
         """Parameters (nc, 2) and unit normal (nc, 3) of slaves X[:, 0] on their facets along smoothed normals.
 
         With a fourth entry in ``lim`` (the parameters found at the unperturbed node set), Newton starts there and
-        takes three iterations: the finite-difference copies lie 1e-7 mm away, so they converge to round-off.
+        takes three iterations: the unperturbed set and its finite-difference copies (1e-7 mm away) converge to
+        round-off.
         """
         xs, xm = X[:, 0], X[:, 1:5]
         warm = len(lim) == 4
         ab = lim[3] if warm else _orthogonal_ab(xs, xm)
-        Xadj = X[np.arange(X.shape[0])[:, None, None, None], lim[1]]
-        ab, n, _ = _smooth_projection_3d(xs, xm, _nodal_normals_3d(Xadj, lim[2]), ab, iters=3 if warm else 6)
+        nf = _facet_normals_3d(X[np.arange(X.shape[0])[:, None, None, None], lim[1]])  # (nc, 4, K, 3)
+        ab, n, _ = _smooth_projection_3d(xs, xm, _nodal_normals_3d(nf, lim[2]), ab, iters=3 if warm else 6)
         return ab, n
 
     def _anchor_weights(self, xi0: np.ndarray) -> np.ndarray:
@@ -742,12 +745,12 @@ class ContactPair:
         X = x[:, nodes].transpose(1, 2, 0)  # (nc, nn, dim)
         w = eps * self.penalty_factor * self.area[act]
         # a slave without an anchor (it came into contact during this step) gets the normal force alone
+        if dim == 3 and len(lim) == 3:  # the projection along smoothed normals, once: the start of every copy's
+            lim = lim + (self._smooth_local_3d(X, lim)[0],)
         f = self._friction_or_normal(X, w, lim, has, xi0) if friction else self._local_force(X, w, lim)
         dofs = (dim * nodes[:, :, None] + np.arange(dim)).reshape(nodes.shape[0], -1)
         K = None
         if tangent:
-            if dim == 3 and len(lim) == 3:  # the copies' projections start from the unperturbed one
-                lim = lim + (self._smooth_local_3d(X, lim)[0],)
             # all 2*nd perturbed copies in one vectorised batch
             nc, nd = f.shape
             step = 1e-7 * max(1.0, float(np.abs(X).max()))
