@@ -353,18 +353,20 @@ def test_a_block_pushed_less_than_the_friction_limit_sticks_and_frictionless_con
     assert abs(f[:, 0].sum()) < 1e-9 * abs(f[:, 1].sum())
 
 
-def test_friction_tangent_matches_finite_differences_in_stick_and_slip():
-    def assembled(pair, x, eps, tangent=False):
-        dofs, f, K, _ = pair.evaluate(x, eps, tangent)
-        r = np.bincount(dofs.ravel(), weights=f.ravel(), minlength=x.size)
-        if not tangent:
-            return r
-        k = dofs.shape[1]
-        rows, cols = np.repeat(dofs, k, axis=1).ravel(), np.tile(dofs, (1, k)).ravel()
-        Kg = np.zeros((x.size, x.size))
-        np.add.at(Kg, (rows, cols), K.ravel())
-        return r, Kg
+def _assembled(pair, x, eps, tangent=False):
+    """A pair's force on every dof (node-interleaved) and, with ``tangent``, its dense assembled tangent."""
+    dofs, f, K, _ = pair.evaluate(x, eps, tangent)
+    r = np.bincount(dofs.ravel(), weights=f.ravel(), minlength=x.size)
+    if not tangent:
+        return r
+    k = dofs.shape[1]
+    rows, cols = np.repeat(dofs, k, axis=1).ravel(), np.tile(dofs, (1, k)).ravel()
+    Kg = np.zeros((x.size, x.size))
+    np.add.at(Kg, (rows, cols), K.ravel())
+    return r, Kg
 
+
+def test_friction_tangent_matches_finite_differences_in_stick_and_slip():
     for dx in (0.05, 1.0):  # stick, slip
         pair, eps, x = _sliding_block(dx, 0.5)
         if dx > 0.5:
@@ -372,16 +374,16 @@ def test_friction_tangent_matches_finite_differences_in_stick_and_slip():
             # the slaves on by 1 um so that each lies inside the slip branch, not on the switch between the two
             x = x.copy()
             x[0, pair.slave] += 1e-3
-        _, K = assembled(pair, x, eps, tangent=True)
+        _, K = _assembled(pair, x, eps, tangent=True)
         v = np.random.default_rng(0).standard_normal(x.shape) * 1e-6
-        fd = (assembled(pair, x + v, eps) - assembled(pair, x - v, eps)) / 2.0
+        fd = (_assembled(pair, x + v, eps) - _assembled(pair, x - v, eps)) / 2.0
         lin = K @ v.T.ravel()  # node-interleaved dofs
         assert np.abs(fd - lin).max() <= 1e-4 * np.abs(lin).max()
 
 
-def test_friction_in_3d_sticks_then_slides_at_mu_times_the_normal_force():
-    """Contact pair alone (no FE solve): the faces of two stacked hexahedral slabs, the upper one's nodes
-    pressed 0.05 mm in and anchored, then moved along x by a little (stick) or a lot (slip)."""
+def _stacked_slabs(mu: float) -> tuple:
+    """Two hexahedral slabs, the upper (x 2..4 mm) 0.1 mm above the lower, on aligned grids: the pair of the upper
+    one's bottom face (slave) against the lower one's top face (master), Coulomb mu; and the reference nodes."""
     from workflow.fem._mesh import build_grid_mesh
 
     xs, zs = np.linspace(0.0, 6.0, 13), np.linspace(0.0, 2.0, 5)
@@ -396,7 +398,14 @@ def test_friction_in_3d_sticks_then_slides_at_mu_times_the_normal_force():
     mid = p[:, faces].mean(axis=2)
     master, slave = faces[np.abs(mid[1] - 2.0) < 1e-9], faces[np.abs(mid[1] - 2.1) < 1e-9]
     pair = ContactPair(p, slave, master, search=1.0, extend=0.5, smoothing=0.0)
-    pair.mu, pair.friction_factor = 0.5, 0.1
+    pair.mu, pair.friction_factor = mu, 0.1
+    return pair, p
+
+
+def test_friction_in_3d_sticks_then_slides_at_mu_times_the_normal_force():
+    """Contact pair alone (no FE solve): the faces of two stacked hexahedral slabs, the upper one's nodes
+    pressed 0.05 mm in and anchored, then moved along x by a little (stick) or a lot (slip)."""
+    pair, p = _stacked_slabs(0.5)
     eps = 71.6
     pressed = p.copy()
     pressed[1, pair.slave] -= 0.15  # 0.05 mm into the lower slab
@@ -420,50 +429,26 @@ def test_friction_in_3d_sticks_then_slides_at_mu_times_the_normal_force():
 
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_3d_contact_tangent_matches_finite_differences_off_the_master_edges(mu):
-    """The 3D pair's tangent (its own local finite differences) against central differences of the assembled force.
+    """The 3D pair's tangent (its own local finite differences, smoothed normals) against central differences of
+    the assembled force.
 
     Stacked slabs with aligned grids put every slave exactly on a master edge, where node-to-face contact has a kink
     (the master's bilinear shape functions peak there), and a central difference straddling it is not a derivative:
     shifted off the edges in x and z and perturbed, the two agree to 1e-9 (measured); with the slaves on the z
     edges they differ by 12-99 % (tangent and force are right, the force is just not differentiable there).
     """
-    from workflow.fem._mesh import build_grid_mesh
-
-    xs, zs = np.linspace(0.0, 6.0, 13), np.linspace(0.0, 2.0, 5)
-    ys = np.array([0.0, 1.0, 2.0, 2.1, 3.1])
-
-    def keep(c):
-        upper = c[1] > 2.1
-        return (~upper & (c[1] < 2.0)) | (upper & (c[0] > 2.0) & (c[0] < 4.0))
-
-    mesh, faces, _ = build_grid_mesh([xs, ys, zs], keep)
-    p = mesh.p
-    mid = p[:, faces].mean(axis=2)
-    master, slave = faces[np.abs(mid[1] - 2.0) < 1e-9], faces[np.abs(mid[1] - 2.1) < 1e-9]
-    pair = ContactPair(p, slave, master, search=1.0, extend=0.5, smoothing=0.0)
-    pair.mu, pair.friction_factor = mu, 0.1
+    pair, p = _stacked_slabs(mu)
     eps = 71.6
     rng = np.random.default_rng(0)
     x = p.copy()
     x[1, pair.slave] -= 0.15
     x[0, pair.slave] += 0.13
     x[2, pair.slave] += 0.13
-    x += 0.01 * rng.standard_normal(x.shape)
+    x += 0.01 * rng.standard_normal(x.shape)  # facets no longer coplanar: the nodal normals turn
     pair.commit(x, eps)
     x[0, pair.slave] += 0.05 if mu else 0.0  # friction: stretch the anchors' springs (stick)
-
-    def assembled(xx, tangent=False):
-        dofs, f, K, _ = pair.evaluate(xx, eps, tangent)
-        r = np.bincount(dofs.ravel(), weights=f.ravel(), minlength=xx.size)
-        if not tangent:
-            return r
-        k = dofs.shape[1]
-        Kg = np.zeros((xx.size, xx.size))
-        np.add.at(Kg, (np.repeat(dofs, k, axis=1).ravel(), np.tile(dofs, (1, k)).ravel()), K.ravel())
-        return r, Kg
-
-    _, K = assembled(x, tangent=True)
+    _, K = _assembled(pair, x, eps, tangent=True)
     v = rng.standard_normal(x.shape) * 1e-5
-    fd = (assembled(x + v) - assembled(x - v)) / 2.0
+    fd = (_assembled(pair, x + v, eps) - _assembled(pair, x - v, eps)) / 2.0
     lin = K @ v.T.ravel()
     assert np.linalg.norm(fd - lin) <= 1e-6 * np.linalg.norm(lin)
