@@ -139,7 +139,7 @@ def main() -> None:
             print(f"unit ray {key}: free reached {ray['free'][3]:.2f}, blocked {ray['blocked'][3]:.2f}", flush=True)
         jobs3 = [(3, {g: pset for g in GROUPS}, f, layout) for pset in sets for f in forces]
         res3 = list(pool.map(standalone, jobs3))
-        rows, jobs2 = [], []
+        rows, jobs2, r3_of_row = [], [], []
         for (_, press, f, _), r3 in zip(jobs3, res3):
             pset = press[GROUPS[0]]
             ratio = pset[1] / pset[0]
@@ -154,11 +154,9 @@ def main() -> None:
                 rows[-1].update({f"p2_{g}": p for g, p in zip(GROUPS, p2)})
                 rows[-1].update({f"m_{g}_nm": m for g, m in zip(GROUPS, m_g)})
                 jobs2.append((2, press2, f, layout))
+                r3_of_row.append(r3)
         res2 = list(pool.map(standalone, jobs2))
-    for row, r2 in zip(rows, res2):
-        r3 = res3[
-            [(j[1][GROUPS[0]], j[2]) for j in jobs3].index(((row["p_top_3d"], row["p_bottom_3d"]), row["tip_force_n"]))
-        ]
+    for row, r2, r3 in zip(rows, res2, r3_of_row):
         st = np.linspace(0.0, r3["ref"][:, 0].max(), 41)
         c3 = np.stack([np.interp(st, r3["ref"][:, 0], r3["backbone"][:, d]) for d in (0, 1)], 1)
         c2 = np.stack([np.interp(st, r2["ref"][:, 0], r2["backbone"][:, d]) for d in (0, 1)], 1)
