@@ -58,6 +58,7 @@ import numpy as np
 __all__ = ["ContactPair", "contact_pairs_from_mesh"]
 
 _XI = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
+FD_STEP = 1e-7  # finite-difference step of the contact tangent, relative to the largest coordinate (mm)
 
 
 def _bilinear(ab: np.ndarray):
@@ -69,11 +70,11 @@ def _bilinear(ab: np.ndarray):
 
 def _tangent_step(a1: np.ndarray, a2: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Parameter step (..., 2) whose move along the surface tangents a1, a2 best matches the vector r (least squares)."""
-    M = np.stack(
-        [np.stack([(a1 * a1).sum(-1), (a1 * a2).sum(-1)], -1), np.stack([(a1 * a2).sum(-1), (a2 * a2).sum(-1)], -1)], -2
-    )
-    rhs = np.stack([(r * a1).sum(-1), (r * a2).sum(-1)], -1)
-    return np.linalg.solve(M, rhs[..., None])[..., 0]
+    # the 2 x 2 normal equations by Cramer's rule: a batched np.linalg.solve of tiny systems costs ten times more
+    m11, m12, m22 = (a1 * a1).sum(-1), (a1 * a2).sum(-1), (a2 * a2).sum(-1)
+    b1, b2 = (r * a1).sum(-1), (r * a2).sum(-1)
+    det = m11 * m22 - m12 * m12
+    return np.stack([m22 * b1 - m12 * b2, m11 * b2 - m12 * b1], -1) / det[..., None]
 
 
 def _window(t: np.ndarray) -> np.ndarray:
@@ -135,6 +136,13 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
+def _cross3(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """u x v over the last axis (3): written out, several times faster than np.cross on small batches."""
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0], axis=-1)
+
+
 def _orthogonal_ab(xs: np.ndarray, xm: np.ndarray, iters: int = 10) -> np.ndarray:
     """Parameters (nc, 2) of the closest point of bilinear facets xm (nc, 4, 3) to points xs (nc, 3), from the centre."""
     ab = np.zeros((xs.shape[0], 2))
@@ -149,7 +157,7 @@ def _orthogonal_ab(xs: np.ndarray, xm: np.ndarray, iters: int = 10) -> np.ndarra
 def _facet_normals_3d(Xf: np.ndarray) -> np.ndarray:
     """Unit normals (..., 3) of bilinear facets Xf (..., 4, 3) at their centres: along the cross product of the
     diagonals."""
-    return _unit(np.cross(Xf[..., 2, :] - Xf[..., 0, :], Xf[..., 3, :] - Xf[..., 1, :]))
+    return _unit(_cross3(Xf[..., 2, :] - Xf[..., 0, :], Xf[..., 3, :] - Xf[..., 1, :]))
 
 
 def _nodal_normals_3d(nf: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -158,33 +166,54 @@ def _nodal_normals_3d(nf: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return _unit((nf * mask[..., None]).sum(axis=-2))
 
 
-def _smooth_projection_3d(xs: np.ndarray, xm: np.ndarray, nn: np.ndarray, ab: np.ndarray, iters: int = 6):
+def _smooth_step(xs, xm, nn, ab, gam):
+    """One Newton step on x(ab) + gamma n(ab) = xs (see ``_smooth_projection_3d``): new ab, gamma and the step."""
+    N, dxi, deta = _bilinear(ab)
+    Nc, dxic, detac = _bilinear(np.clip(ab, -1.0, 1.0))
+    on = (np.abs(ab) <= 1.0).astype(float)  # the normal's parameter derivative is zero where it is held
+    nhat = np.einsum("...a,...ai->...i", Nc, nn)
+    dn1 = np.einsum("...a,...ai->...i", dxic, nn) * on[..., :1]
+    dn2 = np.einsum("...a,...ai->...i", detac, nn) * on[..., 1:]
+    r = np.einsum("...a,...ai->...i", N, xm) + gam[..., None] * nhat - xs
+    a1 = np.einsum("...a,...ai->...i", dxi, xm) + gam[..., None] * dn1
+    a2 = np.einsum("...a,...ai->...i", deta, xm) + gam[..., None] * dn2
+    # J = [a1 a2 nhat], J step = -r by Cramer's rule (triple products; cheaper than a batched 3 x 3 solve)
+    c23, c31, c12 = _cross3(a2, nhat), _cross3(nhat, a1), _cross3(a1, a2)
+    det = np.einsum("...i,...i->...", a1, c23)
+    step = -np.stack([np.einsum("...i,...i->...", r, c) for c in (c23, c31, c12)], -1) / det[..., None]
+    return np.clip(ab + step[..., :2], -3.0, 3.0), gam + step[..., 2], step
+
+
+def _smooth_projection_3d(
+    xs: np.ndarray, xm: np.ndarray, nn: np.ndarray, ab: np.ndarray, iters: int = 6, tol: float | None = None
+):
     """Projection of slaves xs (..., 3) onto facets xm (..., 4, 3) along the interpolated normal (3D).
 
     The normal field of the facet is n(ab) = sum_a N_a(ab) n_a over its nodal normals nn (..., 4, 3), held at its
     edge value past the facet (as the 2D segment's past a free edge).  Newton on x(ab) + gamma n(ab) = xs from the
-    orthogonal projection ``ab``.  Returns the parameters (..., 2), unit normal (..., 3) and gap (..., ) in mm.
+    orthogonal projection ``ab``, ``iters`` steps.  With ``tol``, each projection stops once its step (parameters
+    and gap, mm) is below it and only the others go on (the finite-difference copies run the fixed count, so that
+    every copy stops alike).  Returns the parameters (..., 2), unit normal (..., 3) and gap (..., ) in mm.
     """
     nhat = np.einsum("...a,...ai->...i", _bilinear(np.clip(ab, -1.0, 1.0))[0], nn)
     N = _bilinear(ab)[0]
     gam = np.einsum("...i,...i->...", xs - np.einsum("...a,...ai->...i", N, xm), nhat) / np.einsum(
         "...i,...i->...", nhat, nhat
     )
-    for _ in range(iters):
-        N, dxi, deta = _bilinear(ab)
-        abc = np.clip(ab, -1.0, 1.0)
-        Nc, dxic, detac = _bilinear(abc)
-        on = (np.abs(ab) <= 1.0).astype(float)  # the normal's parameter derivative is zero where it is held
-        nhat = np.einsum("...a,...ai->...i", Nc, nn)
-        dn1 = np.einsum("...a,...ai->...i", dxic, nn) * on[..., :1]
-        dn2 = np.einsum("...a,...ai->...i", detac, nn) * on[..., 1:]
-        r = np.einsum("...a,...ai->...i", N, xm) + gam[..., None] * nhat - xs
-        a1 = np.einsum("...a,...ai->...i", dxi, xm) + gam[..., None] * dn1
-        a2 = np.einsum("...a,...ai->...i", deta, xm) + gam[..., None] * dn2
-        J = np.stack([a1, a2, nhat], axis=-1)
-        step = np.linalg.solve(J, -r[..., None])[..., 0]
-        ab = np.clip(ab + step[..., :2], -3.0, 3.0)
-        gam = gam + step[..., 2]
+    if tol is None:
+        for _ in range(iters):
+            ab, gam, _ = _smooth_step(xs, xm, nn, ab, gam)
+    else:
+        shape = ab.shape[:-1]
+        xs_, xm_, nn_ = xs.reshape(-1, 3), xm.reshape(-1, 4, 3), nn.reshape(-1, 4, 3)
+        ab, gam = ab.reshape(-1, 2).copy(), gam.reshape(-1).copy()
+        live = np.arange(gam.size)
+        for _ in range(iters):
+            ab[live], gam[live], step = _smooth_step(xs_[live], xm_[live], nn_[live], ab[live], gam[live])
+            live = live[np.abs(step).max(axis=1) >= tol]
+            if not live.size:
+                break
+        ab, gam = ab.reshape(shape + (2,)), gam.reshape(shape)
     n = _unit(np.einsum("...a,...ai->...i", _bilinear(np.clip(ab, -1.0, 1.0))[0], nn))
     g = np.einsum("...i,...i->...", xs - np.einsum("...a,...ai->...i", _bilinear(ab)[0], xm), n)
     return ab, n, g
@@ -481,16 +510,27 @@ class ContactPair:
         k = min(4, dc.shape[1])
         cand = np.take_along_axis(self._pool, np.argpartition(dc, k - 1, axis=1)[:, :k], axis=1)  # (ns, k)
         X = xm[cand]  # (ns, k, 4, 3)
-        ab = np.zeros(cand.shape + (2,))
+        # (Gauss-)Newton for each candidate's (xi, eta), 8 steps; a candidate whose step falls below 1e-10 (round-off
+        # on these nearly flat facets) leaves the loop: most converge in a few steps, far slaves on warped facets
+        # only linearly
+        Xc, xsc = X.reshape(-1, 4, 3), np.repeat(xs, k, axis=0)
+        abf = np.zeros((Xc.shape[0], 2))
+        live = np.arange(abf.shape[0])
         for _ in range(8):
-            N, dxi, deta = _bilinear(ab)
-            xp = np.einsum("ska,skai->ski", N, X)
-            a1 = np.einsum("ska,skai->ski", dxi, X)
-            a2 = np.einsum("ska,skai->ski", deta, X)
-            ab = np.clip(ab + _tangent_step(a1, a2, xs[:, None, :] - xp), -3.0, 3.0)
-        N = _bilinear(ab)[0]
+            N, dxi, deta = _bilinear(abf[live])
+            Xl = Xc[live]
+            a1, a2 = np.einsum("ca,cai->ci", dxi, Xl), np.einsum("ca,cai->ci", deta, Xl)
+            new = np.clip(abf[live] + _tangent_step(a1, a2, xsc[live] - np.einsum("ca,cai->ci", N, Xl)), -3.0, 3.0)
+            moved = np.abs(new - abf[live]).max(axis=1) >= 1e-10
+            abf[live] = new
+            live = live[moved]
+            if not live.size:
+                break
+        ab = abf.reshape(cand.shape + (2,))
+        N, dxi, deta = _bilinear(ab)
+        a1, a2 = np.einsum("ska,skai->ski", dxi, X), np.einsum("ska,skai->ski", deta, X)
         xp = np.einsum("ska,skai->ski", N, X)
-        nrm = np.cross(a1, a2)
+        nrm = _cross3(a1, a2)
         nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
         g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
         if self.smooth_normals:
@@ -501,7 +541,7 @@ class ContactPair:
                 nodal = _nodal_normals_3d(_facet_normals_3d(xm)[self._adj], self._adj_mask)  # (nm, 4, 3)
                 nn = nodal[cand[near]]
                 xsn = np.broadcast_to(xs[near, None, :], X[near].shape[:2] + (3,))
-                ab[near], nrm[near], g[near] = _smooth_projection_3d(xsn, X[near], nn, ab[near])
+                ab[near], nrm[near], g[near] = _smooth_projection_3d(xsn, X[near], nn, ab[near], tol=1e-10)
                 N = _bilinear(ab)[0]
         lim = self.lim[cand]  # (ns, k, 2, 2)
         inside = np.all((ab >= lim[..., 0] - 1e-6) & (ab <= lim[..., 1] + 1e-6), axis=-1)
@@ -582,7 +622,7 @@ class ContactPair:
             else:
                 ab = _orthogonal_ab(xs, xm)
                 N, dxi, deta = _bilinear(ab)
-                n = np.cross(np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm))
+                n = _cross3(np.einsum("ca,cai->ci", dxi, xm), np.einsum("ca,cai->ci", deta, xm))
                 n /= np.linalg.norm(n, axis=1, keepdims=True)
             L = lim[0]  # (nc, 2 directions, lo/hi)
             lo, hi = L[..., 0], L[..., 1]
@@ -751,9 +791,10 @@ class ContactPair:
         dofs = (dim * nodes[:, :, None] + np.arange(dim)).reshape(nodes.shape[0], -1)
         K = None
         if tangent:
-            # all 2*nd perturbed copies in one vectorised batch
+            # all 2*nd perturbed copies in one vectorised batch (central: a slave on a master edge, where the
+            # force's rate jumps, gets the mean of the two one-sided rates; forward differences stall the 2D unit)
             nc, nd = f.shape
-            step = 1e-7 * max(1.0, float(np.abs(X).max()))
+            step = FD_STEP * max(1.0, float(np.abs(X).max()))
             E = np.eye(nd) * step
             Xf = X.reshape(nc, -1)
             Xb = np.concatenate([Xf[None] + E[:, None, :], Xf[None] - E[:, None, :]])  # (2nd, nc, nd)
