@@ -295,12 +295,13 @@ def _stall_diagnosis(last: float, start: float) -> str:
     return f"; the tangent stays regular ({where}): a non-smooth stall (contact or an element inverting), not a limit point"
 
 
-def _slope(model: Model, u: np.ndarray, du: np.ndarray, lam: float, p_ref: np.ndarray) -> float:
-    """du . r(u + du): the residual of the whole state (nodal and enhanced) along the correction."""
+def _slope(model: Model, u: np.ndarray, du: np.ndarray, lam: float, p_ref: np.ndarray):
+    """du . r(u + du): the residual of the whole state (nodal and enhanced) along the correction, and that
+    residual's (r, info) (None if an element inverted)."""
     r, _, info = model.evaluate(model.increment(u, du, p_ref), lam, p_ref, tangent=False)
     if r is None:
-        return np.inf
-    return float(du[: model.n] @ r + du[model.n :] @ info["r_internal"])
+        return np.inf, None
+    return float(du[: model.n] @ r + du[model.n :] @ info["r_internal"]), (r, info)
 
 
 def _line_search(
@@ -312,7 +313,7 @@ def _line_search(
     p_ref: np.ndarray,
     ratio: float = 0.5,
     trials: int = 3,
-) -> np.ndarray:
+):
     """Scale the Newton correction so that the residual's component along it drops.
 
     s(a) = du . r(u + a du); s0 = s(0) < 0 for a descent direction.  The full
@@ -321,30 +322,42 @@ def _line_search(
     line search).  This tames the first iterations of a load step, where the
     linearised rotation of nearly incompressible and of stiff paper elements
     causes large spurious volumetric stresses.
+
+    Returns the scaled correction and, where the full step is kept, the residual (r, info) there: Newton's
+    convergence test at the new state needs nothing more, so the step's last iteration forms no tangent.
     """
     if not s0 < 0:
-        return du
+        return du, None
     a_lo, s_lo, a_hi = 0.0, s0, 1.0
-    s_hi = _slope(model, u, du, lam, p_ref)
+    s_hi, full = _slope(model, u, du, lam, p_ref)
     if np.isfinite(s_hi) and abs(s_hi) <= ratio * abs(s0):
-        return du
+        return du, full
     a = 1.0
     for _ in range(trials):
         if not np.isfinite(s_hi):
             a = 0.5 * (a_lo + a_hi)
         else:
             if s_hi < 0:  # still descending at the full step: take it
-                return du * a_hi
+                return du * a_hi, (full if a_hi == 1.0 else None)
             a = a_lo - s_lo * (a_hi - a_lo) / (s_hi - s_lo)
             a = min(max(a, a_lo + 0.1 * (a_hi - a_lo)), a_lo + 0.9 * (a_hi - a_lo))
-        sa = _slope(model, u, a * du, lam, p_ref) / a
+        sa = _slope(model, u, a * du, lam, p_ref)[0] / a
         if np.isfinite(sa) and abs(sa) <= ratio * abs(s0):
-            return a * du
+            return a * du, None
         if np.isfinite(sa) and sa < 0:
             a_lo, s_lo = a, sa
         else:
             a_hi, s_hi = a, sa
-    return a * du
+    return a * du, None
+
+
+def _converged(model: Model, r: np.ndarray, info: dict, opts: dict) -> bool:
+    """|r| <= max(rtol (|f_ext| + |reactions|), atol) over the free nodal and the enhanced unknowns."""
+    rr = model.T.T @ r
+    ri = info["r_internal"]
+    norm = float(np.sqrt(rr @ rr + ri @ ri))
+    ref = info["f_ext_norm"] + float(np.linalg.norm(r[model.constrained]))
+    return norm <= max(opts["rtol"] * ref, opts["atol"])
 
 
 def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: dict):
@@ -356,7 +369,12 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
     u = np.concatenate([model.T @ u0[model.rep] + lam * model.uD, u0[n:]])
     r0 = None
     info = {}
+    known = None  # the residual (r, info) of u when the line search already formed it
     for it in range(1, opts["max_iter"] + 1):
+        if known is not None:  # test convergence on it first: at the step's last iterate no tangent is needed
+            r, info = known
+            if _converged(model, r, info, opts):
+                return True, u, it - 1, "", info
         r, K, info = model.evaluate(u, lam, p_ref)
         if r is None:
             return False, u, it, "inverted element", info
@@ -365,8 +383,7 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
         norm = float(np.sqrt(rr @ rr + ri @ ri))
         if not np.isfinite(norm):
             return False, u, it, "non-finite residual", info
-        ref = info["f_ext_norm"] + float(np.linalg.norm(r[model.constrained]))
-        if it > 1 and norm <= max(opts["rtol"] * ref, opts["atol"]):
+        if it > 1 and known is None and _converged(model, r, info, opts):
             return True, u, it - 1, "", info
         if r0 is None:
             r0 = max(norm, 1e-300)
@@ -385,8 +402,9 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
         du = T @ dv
         if model.nstate > n:
             du = np.concatenate([du, model.solid.recover(du)])
+        known = None
         if opts["line_search"]:
-            du = _line_search(model, u, du, float(du[:n] @ r + du[n:] @ ri), lam, p_ref)
+            du, known = _line_search(model, u, du, float(du[:n] @ r + du[n:] @ ri), lam, p_ref)
         u = model.increment(u, du, p_ref)
     return False, u, opts["max_iter"], "no convergence", info
 
