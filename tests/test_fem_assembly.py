@@ -202,3 +202,21 @@ class _Load:
 
     def external(self, x, u, lam):
         return lam * self.f
+
+
+def test_newton_forms_no_tangent_at_an_iterate_the_line_search_already_found_converged(monkeypatch):
+    """The line search's residual at the full step is the next iterate's: a step that ends on a full step tests
+    convergence on it and assembles no tangent there (before: one tangent per iteration plus one per step)."""
+    from workflow.fem import _solve
+
+    calls = {True: 0, False: 0}
+    evaluate = _solve.Model.evaluate
+
+    def counted(self, u, lam, p_ref, tangent=True):
+        calls[tangent] += 1
+        return evaluate(self, u, lam, p_ref, tangent)
+
+    monkeypatch.setattr(_solve.Model, "evaluate", counted)
+    res = fem.solve_unit(fem.build_unit_mesh(h=2.0, dim=2), 60.0, 0.0, "free", False)
+    assert res.status == 0 and res.steps > 10
+    assert calls[True] < res.newton_iterations + res.steps // 2

@@ -351,13 +351,12 @@ def _line_search(
     return a * du, None
 
 
-def _converged(model: Model, r: np.ndarray, info: dict, opts: dict) -> bool:
-    """|r| <= max(rtol (|f_ext| + |reactions|), atol) over the free nodal and the enhanced unknowns."""
+def _residual_norm(model: Model, r: np.ndarray, info: dict, opts: dict) -> tuple[float, float]:
+    """|r| over the free nodal and the enhanced unknowns, and the tolerance max(rtol (|f_ext| + |reactions|), atol)."""
     rr = model.T.T @ r
     ri = info["r_internal"]
-    norm = float(np.sqrt(rr @ rr + ri @ ri))
     ref = info["f_ext_norm"] + float(np.linalg.norm(r[model.constrained]))
-    return norm <= max(opts["rtol"] * ref, opts["atol"])
+    return float(np.sqrt(rr @ rr + ri @ ri)), max(opts["rtol"] * ref, opts["atol"])
 
 
 def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: dict):
@@ -372,18 +371,17 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
     known = None  # the residual (r, info) of u when the line search already formed it
     for it in range(1, opts["max_iter"] + 1):
         if known is not None:  # test convergence on it first: at the step's last iterate no tangent is needed
-            r, info = known
-            if _converged(model, r, info, opts):
-                return True, u, it - 1, "", info
+            norm, tol = _residual_norm(model, *known, opts)
+            if norm <= tol:
+                return True, u, it - 1, "", known[1]
         r, K, info = model.evaluate(u, lam, p_ref)
         if r is None:
             return False, u, it, "inverted element", info
-        rr = T.T @ r
         ri = info["r_internal"]
-        norm = float(np.sqrt(rr @ rr + ri @ ri))
+        norm, tol = _residual_norm(model, r, info, opts)
         if not np.isfinite(norm):
             return False, u, it, "non-finite residual", info
-        if it > 1 and known is None and _converged(model, r, info, opts):
+        if it > 1 and norm <= tol:
             return True, u, it - 1, "", info
         if r0 is None:
             r0 = max(norm, 1e-300)
