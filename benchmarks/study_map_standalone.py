@@ -1,7 +1,8 @@
 """Which 2D-to-3D pressure map makes the 2D stand-alone actuator agree with the 3D one under the same end load?
 
-Not a test: a study (docs/actuator.md, "2D–3D mapping", under load), not yet run to its end: its six 3D stand-alone
-solves at 4 mm took more than an hour of one core on a shared machine. The paper's map (section
+Not a test: a study (docs/actuator.md, "2D–3D mapping", under load). Run for one set (``--sets 200:0``, 4 751 s
+on one core): each 3D stand-alone solve at 4 mm takes 30-45 min of a core, and under the 0.5 N tip force every solve
+stopped short of its load on the solver's step budget, so rows under load compare different loads. The paper's map (section
 3.2, Fig. 17) matches the free angles of the 2D and 3D units; the loaded map matches their angles under the moment
 a unit carries, with the unit model's linear spring theta(P, M) = theta_free(P) (1 - M / M_blocked(P)) (paper
 section 2.4; ``workflow.actuator.unit_model``). Here both maps are built from FE rays of the units on the same
