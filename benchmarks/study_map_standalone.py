@@ -47,10 +47,12 @@ OUT = ROOT / "benchmarks" / "out"
 H = {2: 2.0, 3: 4.0}  # the stand-alone meshes of the workflow (fea_check.h_actuator_mm, standalone.h_3d_mm[0])
 
 
-def _config():
+def _config(max_steps: int | None = None):
     cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
     act, fc = dict(cfg["actuator"]), dict(cfg["fea_check"])
     solver = {**dict(act.get("solver", {})), **dict(fc.get("solver", {}))}
+    if max_steps:  # --max-steps: the stand-alone solves' step budget (default: the check's)
+        solver["max_steps"] = max_steps
     return act, solver, list(fc.get("restarts", []))
 
 
@@ -70,9 +72,10 @@ def unit_rays(spec: str) -> dict:
 
 
 def standalone(args) -> dict:
-    """One stand-alone solve: dim, {group: (P_T, P_B)} in kPa, tip force N; with the config's restarts."""
-    dim, press, force, layout = args
-    act, solver, restarts = _config()
+    """One stand-alone solve: dim, {group: (P_T, P_B)} in kPa, tip force N, layout, step budget (None: the
+    check's); with the config's restarts."""
+    dim, press, force, layout, max_steps = args
+    act, solver, restarts = _config(max_steps)
     um = build_actuator_mesh(act["geometry"], dict(zip(GROUPS, layout)), h=H[dim], dim=dim, **layer_options(act))
     contact = {k: v for k, v in dict(act.get("contact", {})).items() if k != "enabled"}
     spent = []
@@ -94,6 +97,7 @@ def standalone(args) -> dict:
         "ndofs": r.ndofs,
         "wall_time_s": float(sum(spent)),
         "attempt": k,
+        "tip_history": r.tip_history,
     }
 
 
@@ -127,6 +131,7 @@ def main() -> None:
     ap.add_argument("--layout", default="4,5,6,6", help="units per group CMC, MCP, PIP, DIP")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default="map_standalone.csv")
+    ap.add_argument("--max-steps", type=int, default=None, help="step budget of the stand-alone solves")
     args = ap.parse_args()
     sets = [tuple(float(v) for v in s.split(":")) for s in args.sets.split(",")]
     forces = [float(f) for f in args.forces.split(",")]
@@ -138,10 +143,10 @@ def main() -> None:
         rays = dict(zip([(int(s[0]), r) for r in ratios for s in ("2", "3")], pool.map(unit_rays, specs)))
         for key, ray in rays.items():
             print(f"unit ray {key}: free reached {ray['free'][3]:.2f}, blocked {ray['blocked'][3]:.2f}", flush=True)
-        jobs3 = [(3, {g: pset for g in GROUPS}, f, layout) for pset in sets for f in forces]
+        jobs3 = [(3, {g: pset for g in GROUPS}, f, layout, args.max_steps) for pset in sets for f in forces]
         res3 = list(pool.map(standalone, jobs3))
         rows, jobs2, r3_of_row = [], [], []
-        for (_, press, f, _), r3 in zip(jobs3, res3):
+        for (_, press, f, _, _), r3 in zip(jobs3, res3):
             pset = press[GROUPS[0]]
             ratio = pset[1] / pset[0]
             x, ref = r3["backbone"][:, 0], r3["ref"][:, 0]
@@ -154,7 +159,7 @@ def main() -> None:
                 rows.append({"p_top_3d": pset[0], "p_bottom_3d": pset[1], "tip_force_n": f, "map": kind})
                 rows[-1].update({f"p2_{g}": p for g, p in zip(GROUPS, p2)})
                 rows[-1].update({f"m_{g}_nm": m for g, m in zip(GROUPS, m_g)})
-                jobs2.append((2, press2, f, layout))
+                jobs2.append((2, press2, f, layout, args.max_steps))
                 r3_of_row.append(r3)
         res2 = list(pool.map(standalone, jobs2))
     for row, r2, r3 in zip(rows, res2, r3_of_row):
@@ -171,6 +176,12 @@ def main() -> None:
                 "status_2d": r2["status"],
                 "load_2d": r2["load_factor"],
                 "tip_error_deg": r2["tip_angle_deg"] - r3["tip_angle_deg"],
+                # where either stopped short: both tip angles at the smaller load factor reached (interpolated along
+                # each solve's accepted steps), so that the two are compared at the same load
+                "load_common": (lc := min(r2["load_factor"], r3["load_factor"])),
+                "tip_error_at_common_deg": float(
+                    np.interp(lc, *r2["tip_history"].T) - np.interp(lc, *r3["tip_history"].T)
+                ),
                 "backbone_rms_mm": float(np.sqrt(np.mean(np.sum((c2 - c3) ** 2, axis=1)))),
             }
         )

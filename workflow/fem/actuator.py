@@ -137,6 +137,7 @@ class StandaloneResult:
     overlap_depth_mm: float = 0.0  # deepest node inside foreign material over the path
     min_pocket: float = np.nan  # smallest pocket over the path: area mm^2 (2D) / volume mm^3 (3D)
     displacement: np.ndarray | None = field(default=None, repr=False)
+    tip_history: np.ndarray | None = field(default=None, repr=False)  # (steps, 2): load factor, tip angle (deg)
 
 
 def solve_standalone(
@@ -167,7 +168,12 @@ def solve_standalone(
     opts.update(dict(solver or {}))
     p_ref = um.mesh.p
     bb = um.nodes["backbone"]
-    res = solve_path(model, p_ref, opts, lambda u, lam, info: overlap_measures(um, model.positions(u, p_ref), info))
+
+    def measure(u, lam, info):
+        x = model.positions(u, p_ref)
+        return {**overlap_measures(um, x, info), "tip_angle_deg": tip_angle_deg(backbone_curve(x, p_ref, bb))}
+
+    res = solve_path(model, p_ref, opts, measure)
     x = model.positions(res.u, p_ref)
     curve = backbone_curve(x, p_ref, bb)
     pocket = "min_pocket_area_mm2" if um.dim == 2 else "min_pocket_volume_mm3"
@@ -187,4 +193,5 @@ def solve_standalone(
         overlap_depth_mm=max([h["overlap_depth_mm"] for h in res.history], default=0.0),
         min_pocket=min([h[pocket] for h in res.history], default=np.nan),
         displacement=res.u if keep_displacement else None,
+        tip_history=np.array([[0.0, 0.0]] + [[h["lam"], h["tip_angle_deg"]] for h in res.history]),
     )
