@@ -452,3 +452,19 @@ def test_3d_contact_tangent_matches_finite_differences_off_the_master_edges(mu):
     fd = (_assembled(pair, x + v, eps) - _assembled(pair, x - v, eps)) / 2.0
     lin = K @ v.T.ravel()
     assert np.linalg.norm(fd - lin) <= 1e-6 * np.linalg.norm(lin)
+
+
+def test_a_collapsed_master_facet_is_out_of_reach_not_a_nan():
+    """A master facet squeezed to a point has a singular projection (Cramer's rule gives NaN): its slaves pair with
+    a sound neighbour or with nothing, and the search returns no NaN gap."""
+    pair, p = _stacked_slabs(0.0)
+    x = p.copy()
+    x[1, pair.slave] -= 0.15  # pressed 0.05 mm into the lower slab
+    k = len(pair.master) // 2
+    f = pair.master[k]
+    x[:, f] = x[:, f].mean(axis=1, keepdims=True)  # that facet's four nodes on one point
+    m, _, _, g, inside = pair._project(x)
+    assert not np.isnan(g).any()
+    assert inside.any() and np.isfinite(g[inside]).all() and (m[inside] != k).all()
+    dofs, force, K, gmin = pair.evaluate(x, 71.6)
+    assert np.isfinite(force).all() and np.isfinite(K).all() and np.isfinite(gmin)

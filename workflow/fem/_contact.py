@@ -74,7 +74,8 @@ def _tangent_step(a1: np.ndarray, a2: np.ndarray, r: np.ndarray) -> np.ndarray:
     m11, m12, m22 = (a1 * a1).sum(-1), (a1 * a2).sum(-1), (a2 * a2).sum(-1)
     b1, b2 = (r * a1).sum(-1), (r * a2).sum(-1)
     det = m11 * m22 - m12 * m12
-    return np.stack([m22 * b1 - m12 * b2, m11 * b2 - m12 * b1], -1) / det[..., None]
+    with np.errstate(divide="ignore", invalid="ignore"):  # a degenerate facet gives NaN; _project drops it
+        return np.stack([m22 * b1 - m12 * b2, m11 * b2 - m12 * b1], -1) / det[..., None]
 
 
 def _window(t: np.ndarray) -> np.ndarray:
@@ -180,7 +181,8 @@ def _smooth_step(xs, xm, nn, ab, gam):
     # J = [a1 a2 nhat], J step = -r by Cramer's rule (triple products; cheaper than a batched 3 x 3 solve)
     c23, c31, c12 = _cross3(a2, nhat), _cross3(nhat, a1), _cross3(a1, a2)
     det = np.einsum("...i,...i->...", a1, c23)
-    step = -np.stack([np.einsum("...i,...i->...", r, c) for c in (c23, c31, c12)], -1) / det[..., None]
+    with np.errstate(divide="ignore", invalid="ignore"):  # as in _tangent_step
+        step = -np.stack([np.einsum("...i,...i->...", r, c) for c in (c23, c31, c12)], -1) / det[..., None]
     return np.clip(ab + step[..., :2], -3.0, 3.0), gam + step[..., 2], step
 
 
@@ -533,6 +535,8 @@ class ContactPair:
         nrm = _cross3(a1, a2)
         nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
         g = np.einsum("ski,ski->sk", xs[:, None, :] - xp, nrm)
+        # a degenerate candidate (its 2 x 2 system singular: NaN from Cramer's rule) is out of reach
+        g = np.where(np.isfinite(g) & np.isfinite(ab).all(axis=-1), g, np.inf)
         if self.smooth_normals:
             # along smoothed normals only for slaves within twice the search radius of a candidate (the rest are
             # out of reach either way): most slaves are far from every wall most of the time
@@ -544,7 +548,7 @@ class ContactPair:
                 ab[near], nrm[near], g[near] = _smooth_projection_3d(xsn, X[near], nn, ab[near], tol=1e-10)
                 N = _bilinear(ab)[0]
         lim = self.lim[cand]  # (ns, k, 2, 2)
-        inside = np.all((ab >= lim[..., 0] - 1e-6) & (ab <= lim[..., 1] + 1e-6), axis=-1)
+        inside = np.all((ab >= lim[..., 0] - 1e-6) & (ab <= lim[..., 1] + 1e-6), axis=-1) & np.isfinite(g)
         # as in 2D: facets whose (extended) range holds the projection first, then the one nearest to the
         # projection clipped onto the facet itself, so that an edge facet's extension never wins over the facet a
         # slave is on (along smoothed normals the projection is not the closest point: a slave on an edge can be
@@ -552,6 +556,7 @@ class ContactPair:
         abc = np.clip(ab, -1.0, 1.0)
         Nc = _bilinear(abc)[0]
         dist = np.linalg.norm(xs[:, None, :] - np.einsum("ska,skai->ski", Nc, X), axis=-1)
+        dist = np.where(np.isfinite(g), dist, np.inf)
         j = np.argmin(np.where(inside, dist, dist + 1e6), axis=1)
         s = np.arange(xs.shape[0])
         return cand[s, j], N[s, j], nrm[s, j], g[s, j], inside[s, j]

@@ -65,7 +65,7 @@ def invariants(F: np.ndarray, second: bool = True):
     which equal the same formulas evaluated on the 2x2 arrays.  Returns
     ``(v, dv, d2v)`` with ``v`` = (I1, I2, J), ``dv`` the three (d, d, ...)
     gradients and ``d2v`` the three (d, d, d, d, ...) Hessians (None unless
-    ``second``).  The laws do not form the Hessians: ``_tangent`` adds their
+    ``second``).  The laws do not form the Hessians: ``_law`` adds their
     terms straight into the tangent.
     """
     d = F.shape[0]
