@@ -1,8 +1,8 @@
 """Which 2D-to-3D pressure map makes the 2D stand-alone actuator agree with the 3D one under the same end load?
 
-Not a test: a study (docs/actuator.md, "2D–3D mapping", under load). Run for one set (``--sets 200:0``, 4 751 s
-on one core): each 3D stand-alone solve at 4 mm takes 30-45 min of a core, and under the 0.5 N tip force every solve
-stopped short of its load on the solver's step budget, so rows under load compare different loads. The paper's map (section
+Not a test: a study (docs/actuator.md, "2D–3D mapping", under load), run so far for one set (``--sets 200:0``): each
+3D stand-alone solve at 4 mm takes 30-45 min of a core; with the FEA check's budget of 150 steps the tip-force solves
+stopped short of their load, with 400 (the default here) they reach it. The paper's map (section
 3.2, Fig. 17) matches the free angles of the 2D and 3D units; the loaded map matches their angles under the moment
 a unit carries, with the unit model's linear spring theta(P, M) = theta_free(P) (1 - M / M_blocked(P)) (paper
 section 2.4; ``workflow.actuator.unit_model``). Here both maps are built from FE rays of the units on the same
@@ -19,7 +19,7 @@ ramped with the pressures):
 4. the 2D stand-alone actuator at each and F: tip angle and backbone against the 3D one.
 
     OMP_NUM_THREADS=1 python benchmarks/study_map_standalone.py [--sets 100:0,200:0,200:100] [--forces 0,0.5]
-        [--layout 4,5,6,6] [--jobs 1]                                        -> benchmarks/out/map_standalone.csv
+        [--layout 4,5,6,6] [--max-steps 400] [--jobs 1]                                        -> benchmarks/out/map_standalone.csv
 """
 
 from __future__ import annotations
@@ -131,7 +131,9 @@ def main() -> None:
     ap.add_argument("--layout", default="4,5,6,6", help="units per group CMC, MCP, PIP, DIP")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default="map_standalone.csv")
-    ap.add_argument("--max-steps", type=int, default=None, help="step budget of the stand-alone solves")
+    ap.add_argument(
+        "--max-steps", type=int, default=400, help="step budget of the stand-alone solves (the check's 150 stop short)"
+    )
     args = ap.parse_args()
     sets = [tuple(float(v) for v in s.split(":")) for s in args.sets.split(",")]
     forces = [float(f) for f in args.forces.split(",")]
