@@ -15,15 +15,16 @@ and J = det F, with the chain rule
     P = sum_a psi_a dI_a/dF,
     A = sum_ab psi_ab dI_a/dF (x) dI_b/dF + sum_a psi_a d2I_a/dFdF,
 
-dI1 = 2F, dI2 = 2(I1 F - F C), dJ = J F^-T and the matching second
-derivatives (``invariants``).
+dI1 = 2F, dI2 = 2(I1 F - F C), dJ = J F^-T and their second derivatives
+(``_law``, which adds them into A term by term; the tangents are checked
+against finite differences of P in the tests).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["mooney_rivlin_isochoric", "neo_hooke_compressible", "invariants", "det_inv"]
+__all__ = ["mooney_rivlin_isochoric", "neo_hooke_compressible", "det_inv"]
 
 
 def det_inv(F: np.ndarray):
@@ -57,63 +58,32 @@ def _basics(F: np.ndarray):
     return C, b, I1, I2, J, Finv
 
 
-def invariants(F: np.ndarray, second: bool = True):
-    """I1, I2, J of F (d, d, ...) and their first (and second) derivatives.
-
-    For d = 2 the invariants are those of the plane-strain F embedded in 3D
-    (F33 = 1), and the derivatives are the in-plane blocks of the 3D ones,
-    which equal the same formulas evaluated on the 2x2 arrays.  Returns
-    ``(v, dv, d2v)`` with ``v`` = (I1, I2, J), ``dv`` the three (d, d, ...)
-    gradients and ``d2v`` the three (d, d, d, d, ...) Hessians (None unless
-    ``second``).  The laws do not form the Hessians: ``_law`` adds their
-    terms straight into the tangent.
-    """
-    d = F.shape[0]
-    C, b, I1, I2, J, Finv = _basics(F)
-    FiT = np.swapaxes(Finv, 0, 1)
-    dI1 = 2.0 * F
-    dI2 = 2.0 * (I1 * F - np.einsum("ik...,kj...->ij...", F, C))
-    dJ = J * FiT
-    if not second:
-        return (I1, I2, J), (dI1, dI2, dJ), None
-    tail = (None,) * (F.ndim - 2)
-    eye = np.eye(d)
-    I4 = np.einsum("ik,jl->ijkl", eye, eye)[(Ellipsis,) + tail]
-    FT = np.swapaxes(F, 0, 1)
-    d2I1 = 2.0 * I4 * np.ones_like(I1)
-    # d/dF_kl of 2(I1 F - F C)_ij: 4 F_ij F_kl + 2 I1 d_ik d_jl - 2 d_ik C_lj - 2 F_il F_kj - 2 b_ik d_jl
-    d2I2 = (
-        4.0 * _outer(F, F)
-        + 2.0 * I1 * I4
-        - 2.0 * eye[(slice(None), None, slice(None), None) + tail] * np.swapaxes(C, 0, 1)[None, :, None, :]
-        - 2.0 * F[:, None, None, :] * FT[None, :, :, None]
-        - 2.0 * b[:, None, :, None] * eye[(None, slice(None), None, slice(None)) + tail]
-    )
-    # d/dF_kl of J F^-T_ij = J (Finv_ji Finv_lk - Finv_jk Finv_li)
-    d2J = J * (_outer(FiT, FiT) - FiT[:, None, None, :] * Finv[None, :, :, None])
-    return (I1, I2, J), (dI1, dI2, dJ), (d2I1, d2I2, d2J)
-
-
 def _law(F, psi_of, tangent):
     """psi, P and A (None without ``tangent``) of a law psi(I1, I2, J) given by ``psi_of(I1, I2, J)`` ->
     (psi, gradient g (3 arrays or scalars), Hessian H (3 x 3 of arrays, scalars or None)).
 
     P = sum_a g_a dI_a/dF and A = sum_ab H_ab dI_a/dF (x) dI_b/dF + sum_a g_a d2I_a/dFdF, with the Hessians of the
-    invariants (see ``invariants``) added term by term: their identity-tensor parts touch d^3 of the d^4 entries,
-    so they go in by index instead of as dense products (with the sum below, the 3D Mooney-Rivlin tangent 1.8x as
-    fast).
+    invariants added term by term,
+
+        d2I1 = 2 d_ik d_jl,
+        d2I2 = 4 F_ij F_kl - 2 F_il F_kj + 2 I1 d_ik d_jl - 2 d_ik C_lj - 2 b_ik d_jl,
+        d2J  = J (Finv_ji Finv_lk - Finv_jk Finv_li):
+
+    the identity-tensor parts touch d^3 of the d^4 entries, so they go in by index instead of as dense products
+    (with the H sum as three outer products, the 3D Mooney-Rivlin tangent 1.8x as fast as the dense form).
     """
     d = F.shape[0]
     C, b, I1, I2, J, Finv = _basics(F)
     FiT = np.swapaxes(Finv, 0, 1)
     dv = (2.0 * F, 2.0 * (I1 * F - np.einsum("ik...,kj...->ij...", F, C)), J * FiT)
     psi, g, H = psi_of(I1, I2, J)
-    P = sum(ga * dva for ga, dva in zip(g, dv) if not (np.isscalar(ga) and ga == 0.0))
+    used = [not (np.isscalar(ga) and ga == 0.0) for ga in g]  # a law may not depend on an invariant (neo-Hooke: I2)
+    P = sum(ga * dva for ga, dva, u in zip(g, dv, used) if u)
     if not tangent:
         return psi, P, None
     # dense parts: g2 (4 F_ij F_kl - 2 F_il F_kj) + g3 J (Finv_ji Finv_lk - Finv_jk Finv_li)
     A = (g[2] * J) * (_outer(FiT, FiT) - FiT[:, None, None, :] * Finv[None, :, :, None])
-    if not (np.isscalar(g[1]) and g[1] == 0.0):
+    if used[1]:
         A += g[1] * (4.0 * _outer(F, F) - 2.0 * F[:, None, None, :] * np.swapaxes(F, 0, 1)[None, :, :, None])
     for a in range(3):  # sum_ac H_ac dv_a (x) dv_c as sum_a dv_a (x) (sum_c H_ac dv_c): three outer products, not six
         w = [H[a][c] * dv[c] for c in range(3) if H[a][c] is not None]
@@ -124,7 +94,7 @@ def _law(F, psi_of, tangent):
     for i in range(d):
         for j in range(d):
             A[i, j, i, j] += diag
-            if not (np.isscalar(g[1]) and g[1] == 0.0):
+            if used[1]:
                 A[i, j, i, :] -= 2.0 * g[1] * C[:, j]
                 A[i, j, :, j] -= 2.0 * g[1] * b[i, :]
     return psi, P, A
