@@ -51,7 +51,7 @@ def _config(max_steps: int | None = None):
     cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
     act, fc = dict(cfg["actuator"]), dict(cfg["fea_check"])
     solver = {**dict(act.get("solver", {})), **dict(fc.get("solver", {}))}
-    if max_steps:  # --max-steps: the stand-alone solves' step budget (default: the check's)
+    if max_steps:  # the stand-alone solves' step budget (None: the FEA check's; main() passes --max-steps)
         solver["max_steps"] = max_steps
     return act, solver, list(fc.get("restarts", []))
 
