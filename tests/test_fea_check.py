@@ -177,6 +177,10 @@ def test_tip_force_bends_the_actuator_linearly_against_the_pressure():
     assert r1.status == 0 and r2.status == 0
     assert r1.backbone_mm[-1, 1] > 0 and r1.tip_angle_deg < 0
     assert r2.backbone_mm[-1, 1] == pytest.approx(2 * r1.backbone_mm[-1, 1], rel=0.01)
+    # the tip angle along the load: from the straight start to the final state, linear in the load here
+    lam, tip = r2.tip_history.T
+    assert lam[0] == 0.0 and lam[-1] == pytest.approx(1.0) and tip[-1] == pytest.approx(r2.tip_angle_deg)
+    np.testing.assert_allclose(tip, lam * r2.tip_angle_deg, rtol=0.02, atol=1e-6)
     # 10 kPa: below the blocks' first corner contact, where these whole-actuator solves still stall
     free = solve_standalone(um, {"A": (10.0, 0.0), "B": (10.0, 0.0)}, solver=SOLVER)
     held = solve_standalone(um, {"A": (10.0, 0.0), "B": (10.0, 0.0)}, solver=SOLVER, tip_force_n=0.02)
