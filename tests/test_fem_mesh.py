@@ -73,3 +73,22 @@ def test_round_corners_maps_a_square_onto_a_quarter_disc():
 def test_a_fillet_larger_than_the_walls_is_an_error():
     with pytest.raises(ValueError, match="fillet 2.5 mm"):
         fem.build_unit_mesh({"fillet": 2.5}, h=1.0, dim=2)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_refine_divides_every_element_of_the_base_mesh_into_r_per_direction(dim):
+    # a systematic family: every interval's count, the paper's and base layers' included, times r, so that
+    # each cell of the base mesh becomes r**dim cells and every base node stays a node
+    base = fem.build_unit_mesh(h=4.0, dim=dim)
+    for r in (2, 3):
+        fine = fem.build_unit_mesh(h=4.0, dim=dim, refine=r)
+        assert fine.refine == r
+        assert fine.mesh.t.shape[1] == r**dim * base.mesh.t.shape[1]
+        for k in range(dim):
+            xb, xf = np.unique(base.mesh.p[k]), np.unique(fine.mesh.p[k])
+            assert xf.size == r * (xb.size - 1) + 1
+            assert np.all(np.min(np.abs(xf[:, None] - xb[None, :]), axis=0) < 1e-12)
+        paper = fine.material == 1
+        assert paper.sum() == r**dim * (base.material == 1).sum()
+    with pytest.raises(ValueError, match="refine"):
+        fem.build_unit_mesh(h=4.0, dim=2, refine=0)

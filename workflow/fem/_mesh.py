@@ -124,6 +124,8 @@ class UnitMesh:
     chamber_group: tuple[str, ...] = ()
     #: the chain is cut at gap centres (the backbone runs on by half a gap past both end blocks)
     end_gaps: bool = False
+    #: every interval's element count at ``h`` multiplied by this (``build_unit_mesh``)
+    refine: int = 1
     _boundary: np.ndarray | None = field(default=None, repr=False)
 
     @property
@@ -143,11 +145,11 @@ class UnitMesh:
         return g["n_chambers"] * g["depth"] + (g["n_chambers"] - (0 if self.end_gaps else 1)) * g["gap"]
 
 
-def _divisions(breaks: np.ndarray, h: float) -> np.ndarray:
-    """Grid coordinates through ``breaks`` with intervals of at most about ``h``."""
+def _divisions(breaks: np.ndarray, h: float, refine: int = 1) -> np.ndarray:
+    """Grid coordinates through ``breaks``: each interval in ``refine`` x ceil(length / h) equal parts."""
     pts = [breaks[:1]]
     for a, b in zip(breaks[:-1], breaks[1:]):
-        n = max(1, int(np.ceil((b - a) / h - 1e-9)))
+        n = int(refine) * max(1, int(np.ceil((b - a) / h - 1e-9)))
         pts.append(np.linspace(a, b, n + 1)[1:])
     return np.concatenate(pts)
 
@@ -240,6 +242,7 @@ def build_unit_mesh(
     paper_layers: int | None = None,
     base_layers: int | None = None,
     end_gaps: bool = False,
+    refine: int = 1,
 ) -> UnitMesh:
     """Structured mesh of the three-chamber unit.
 
@@ -259,10 +262,19 @@ def build_unit_mesh(
     end_gaps : bool
         Cut the chain at gap centres: the backbone runs on by half a gap past
         both end blocks, as in a unit inside a longer chain.
+    refine : int
+        Every interval's element count, the paper's and the base layers' included, multiplied by this: the
+        meshes of one ``h`` and ``refine`` = 1, 2, 3, ... form a systematic family (every element's shape
+        kept, its size divided by ``refine``), which meshes of different ``h`` are not (a 2 mm interval
+        gets 1 element at h = 2 and 1.4 mm but 2 at h = 1 mm).
     """
     g = dict(DEFAULT_GEOMETRY)
     g.update(dict(geom or {}))
-    return _chain_mesh(g, h, dim, layer_counts(g, h, paper_layers, base_layers), None, end_gaps)
+    npap, nbase = layer_counts(g, h, paper_layers, base_layers)
+    r = int(refine)
+    if r < 1:
+        raise ValueError(f"refine must be a positive integer, got {refine!r}")
+    return _chain_mesh(g, h, dim, (r * npap, r * nbase), None, end_gaps, r)
 
 
 def build_actuator_mesh(
@@ -298,7 +310,13 @@ def build_actuator_mesh(
 
 
 def _chain_mesh(
-    g: dict, h: float, dim: int, layers: tuple[int, int], groups: tuple[str, ...] | None, end_gaps: bool = False
+    g: dict,
+    h: float,
+    dim: int,
+    layers: tuple[int, int],
+    groups: tuple[str, ...] | None,
+    end_gaps: bool = False,
+    refine: int = 1,
 ) -> UnitMesh:
     """Chain of ``g["n_chambers"]`` chambers; ``groups`` (per chamber) adds the actuator's sets.
 
@@ -332,21 +350,21 @@ def _chain_mesh(
         xs.append(L + gap / 2)
     xb = np.array(xs)
     above = np.array([yb, yf, yp, yt]) if yf > yb else np.array([yb, yp, yt])  # breakpoints of one side
-    xc = _divisions(xb, h)
+    xc = _divisions(xb, h, refine)
     npap, nbase = layers
     yc = np.concatenate(
         [
-            _divisions(-above[::-1], h),
+            _divisions(-above[::-1], h, refine),
             np.linspace(-yb, -y0, nbase + 1)[1:],
             np.linspace(-y0, y0, npap + 1)[1:],
             np.linspace(y0, yb, nbase + 1)[1:],
-            _divisions(above, h)[1:],
+            _divisions(above, h, refine)[1:],
         ]
     )
     coords = [xc, yc]
     if dim == 3:
         zb = np.array([0.0, g["width"] / 2 - ts, g["width"] / 2])
-        coords.append(_divisions(zb, h))
+        coords.append(_divisions(zb, h, refine))
     pockets = [(k * (d + gap) + tf, k * (d + gap) + d - tf) for k in range(n)]
     gaps = [(k * (d + gap) + d, (k + 1) * (d + gap)) for k in range(n - 1)]
 
@@ -462,6 +480,7 @@ def _chain_mesh(
         contact_surfaces=surfaces,
         chamber_group=tuple(groups or ()),
         end_gaps=bool(end_gaps),
+        refine=int(refine),
         contact_parts=part_of,
         _boundary=faces,
     )
