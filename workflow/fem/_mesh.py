@@ -25,6 +25,9 @@ pocket and gap cells removed.  Through their thickness the paper layer has
 ``paper_layers`` elements (default ceil(1 mm / h): one down to h = 1 mm, then
 refined with h, so that halving h halves every element) and each base layer
 ``base_layers`` (default ceil(2 bot_layer / h): elements half as tall as h).
+Meshes of different h are not a systematic refinement (a 2 mm wall gets one
+element at h = 2 and 1.4 mm, two at 1 mm); ``refine`` = r multiplies every
+interval's count at one h, the layers' included, so that r = 1, 2, 3, ... are.
 The base layers carry the actuator's bending: on Q1/P0 silicone elements a
 bent layer is measurably too flexible when its elements are as tall as long
 (+2.3 % at 2 elements through the 2 mm base and h = 1 mm) and too stiff when
