@@ -8,7 +8,14 @@ import pytest
 
 from workflow import fem
 from workflow.actuator.moment_check import chain_mesh
-from workflow.actuator.stiffness import SOLVES, compare_model, rotation_stiffness, stiffness_dataset
+from workflow.actuator.stiffness import (
+    SOLVES,
+    StiffnessTable,
+    compare_model,
+    heldout_errors,
+    rotation_stiffness,
+    stiffness_dataset,
+)
 from workflow.actuator.unit_model import UnitModel
 
 J = {name: k for k, (name, _, _) in enumerate(SOLVES)}
@@ -79,3 +86,58 @@ def test_bad_inputs_are_named(chain):
         rotation_stiffness(chain, [[0.0, 0.0]], delta_deg=0.0)
     with pytest.raises(ValueError, match="chain cut at gap centres"):
         rotation_stiffness(fem.build_unit_mesh(None, h=2.0, dim=2), [[0.0, 0.0]])
+
+
+def test_stiffness_table_is_exact_at_its_pairs_symmetric_and_never_extrapolates():
+    # log k linear in the folded pressures is reproduced everywhere inside the hull; a locked pair (NaN) is left out
+    g = np.array([0.0, 100.0, 200.0, 300.0])
+    P = np.array([(a, b) for a in g for b in g if a >= b])
+
+    def k_of(a, b):
+        return np.exp(-3.0 + 0.01 * np.maximum(a, b) + 0.004 * np.minimum(a, b))
+
+    k = k_of(P[:, 0], P[:, 1])
+    k[(P[:, 0] == 300.0) & (P[:, 1] == 300.0)] = np.nan  # locked
+    table = StiffnessTable(P[:, 0], P[:, 1], k)
+    q = np.array([[50.0, 0.0], [150.0, 60.0], [250.0, 120.0], [120.0, 250.0]])
+    assert np.allclose(table(q[:, 0], q[:, 1]), k_of(q[:, 0], q[:, 1]), rtol=1e-12)
+    assert table(60.0, 150.0) == pytest.approx(table(150.0, 60.0), rel=1e-14)
+    assert np.isnan(table(350.0, 0.0)) and np.isnan(table(-10.0, 0.0))
+    assert np.isnan(table(290.0, 290.0))  # beyond the last finite pair on the diagonal: no value, not a guess
+    with pytest.raises(ValueError, match="three pairs"):
+        StiffnessTable([0.0, 100.0, 200.0], [0.0, 0.0, 0.0], [1.0, 2.0, 3.0])  # collinear
+
+
+def test_unit_model_takes_the_measured_stiffness_inside_its_window_only():
+    # secant k = 2 everywhere; the measurement 5 is used where |theta_f| < 3 deg, i.e. near the diagonal
+    def angle(pt, pb):
+        return 0.1 * (np.asarray(pt, float) - np.asarray(pb, float))
+
+    def moment(pt, pb):
+        return 2.0 * angle(pt, pb)
+
+    spring = UnitModel(angle, moment)
+    measured = UnitModel(angle, moment, measured_stiffness=lambda pt, pb: np.full(np.shape(pt), 5.0))
+    pt, pb = np.array([100.0, 100.0, 100.0]), np.array([100.0, 80.0, 0.0])  # theta_f 0, 2, 10 deg
+    assert np.allclose(measured.stiffness_nm_per_deg(pt, pb), [5.0, 5.0, 2.0])
+    assert np.allclose(spring.stiffness_nm_per_deg(pt[1:], pb[1:]), 2.0)
+    # at P_T = P_B the angle under a moment is -M / k_measured
+    assert measured.angle_deg(150.0, 150.0, 1.0) == pytest.approx(-0.2)
+
+
+def test_stiffness_table_reproduces_heldout_fea_pairs(chain):
+    # the table from a coarse grid (three pairs, no contact) predicts the chain's stiffness at three pairs it was not
+    # built on: moment error over the +-1 deg window under 0.2 % of the grid's largest blocked moment, k within 2 %
+    fit = [[0.0, 0.0], [60.0, 0.0], [60.0, 60.0]]
+    held = [[30.0, 0.0], [30.0, 30.0], [60.0, 30.0]]
+    res = rotation_stiffness(chain, fit + held, delta_deg=1.0, solve_kwargs={"contact": False})
+    P, k = res["pairs_kpa"], res["k_nm_per_deg"]
+    assert np.isfinite(k).all()
+    table = StiffnessTable(P[:3, 0], P[:3, 1], k[:3])
+    m_max = float(np.abs(res["moment_nm"][:3, J["blocked"]]).max())
+    e = heldout_errors(table, P[3:, 0], P[3:, 1], k[3:], 1.0, m_max)
+    assert np.all(np.abs(e["rel_error"]) < 0.02)
+    assert np.all(e["moment_error_share"] < 0.002)
+    # and a table with the wrong trend (k halved at 60 kPa) fails the same check
+    wrong = StiffnessTable(P[:3, 0], P[:3, 1], k[:3] * np.array([1.0, 0.5, 0.5]))
+    assert np.abs(heldout_errors(wrong, P[3:, 0], P[3:, 1], k[3:], 1.0, m_max)["rel_error"]).max() > 0.1

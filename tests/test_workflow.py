@@ -115,6 +115,11 @@ def test_smoke_outputs(smoke):
         k = st["k_nm_per_deg"].values
         assert (k > 0).all() and k[1] > k[0]  # (60, 60) kPa stiffer than (0, 0)
         assert "k_model_rel_error" in st
+        # the stiffness table from the three fit pairs, checked at the held-out (30, 30) kPa: -21 % on this coarse
+        # grid (k rises 5x from 0 to 60 kPa as the gaps close; the default grid has pairs 25-50 kPa apart)
+        assert list(st["fit"].values) == [True, True, True, False]
+        assert abs(float(st["k_table_rel_error"][3])) < 0.3 and "k_model_table_rel_error" in st
+        assert 0 < st.attrs["heldout_moment_error_share_max"] < 0.05
     assert (res / "musculoskeletal" / "rsm_r2.png").stat().st_size > 10_000
     assert any((res / "benchmarks" / "rules").glob("rsm.tsv"))
     # the run ledger: one MLflow run per patient, with headline metrics

@@ -6,6 +6,7 @@ end-moment check.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -23,7 +24,15 @@ from workflow.actuator.plots import (
     plot_unit_stiffness,
 )
 from workflow.actuator.pressure_limit import PressureLimit, smallest
-from workflow.actuator.stiffness import DEFAULT_STIFFNESS, compare_model, rotation_stiffness, stiffness_dataset
+from workflow.actuator.stiffness import (
+    DEFAULT_STIFFNESS,
+    SOLVES,
+    StiffnessTable,
+    compare_model,
+    heldout_errors,
+    rotation_stiffness,
+    stiffness_dataset,
+)
 from workflow.actuator.surrogates import Surrogate, fit_surrogate, load_surrogate, save_surrogate, surrogate_cv
 from workflow.actuator.sweep import merge_shards
 from workflow.actuator.unit_model import load_unit_model
@@ -274,12 +283,49 @@ def write_unit_stiffness(
         unit.h,
         chain.mesh.p.size,
     )
-    res = rotation_stiffness(chain, st["pairs_kpa"], delta_deg=float(st["delta_deg"]), actuator=actuator)
-    cmp = None
-    if surrogate_2d is not None:
-        cmp = compare_model(res, load_unit_model(surrogate_2d, **dict(unit_model or {})))
+    pairs, held = list(st["pairs_kpa"]), list(st.get("heldout_kpa") or [])
+    delta = float(st["delta_deg"])
+    res = rotation_stiffness(chain, pairs + held, delta_deg=delta, actuator=actuator)
+    fit = np.arange(len(pairs) + len(held)) < len(pairs)
+    P, k = res["pairs_kpa"], res["k_nm_per_deg"]
+    model = load_unit_model(surrogate_2d, **dict(unit_model or {})) if surrogate_2d is not None else None
+    # the moment scale of the errors: the unit's largest blocked moment over the sweep's pressures (one side at
+    # 0 to p_max); without a surrogate the chain's largest over the study's pairs
+    if model is not None:
+        p = np.linspace(0.0, model.p_max_kpa, 31)
+        m_max = float(np.nanmax(np.abs(np.r_[model.blocked_moment_nm(p, 0.0), model.blocked_moment_nm(0.0, p)])))
+    else:
+        m_max = float(np.nanmax(np.abs(res["moment_nm"][:, [name for name, _, _ in SOLVES].index("blocked")])))
+    try:
+        table = StiffnessTable(P[fit, 0], P[fit, 1], k[fit])
+    except ValueError as exc:  # too few pairs with a finite k: the study stands without its table
+        log.warning("unit stiffness: no stiffness table (%s)", exc)
+        table, errs = None, None
+    else:
+        errs = heldout_errors(table, P[:, 0], P[:, 1], k, delta, m_max)
+        for (pt, pb), e, r in zip(P[~fit], errs["moment_error_share"][~fit], errs["rel_error"][~fit]):
+            log.info(
+                "stiffness table at held-out (%g, %g) kPa: k %+.1f %% off, moment error %.2f %% of M_b,max",
+                pt,
+                pb,
+                100 * r,
+                100 * e,
+            )
+    cmp = cmp_table = None
+    if model is not None:
+        cmp = compare_model(res, model)
+        if table is not None:
+            cmp_table = compare_model(res, replace(model, measured_stiffness=table, measured_window_deg=delta))
     ds = stiffness_dataset(
-        res, delta_deg=float(st["delta_deg"]), h_mm=float(unit.h), chain_units=int(st["chain_units"]), model=cmp
+        res,
+        delta_deg=delta,
+        h_mm=float(unit.h),
+        chain_units=int(st["chain_units"]),
+        model=cmp,
+        fit=fit,
+        table=errs,
+        m_blocked_max_nm=m_max,
+        model_with_table=cmp_table,
     )
     write_dataset(
         ds,

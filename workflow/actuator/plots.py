@@ -164,25 +164,55 @@ def plot_moment_check(ds: xr.Dataset, out: str | Path) -> Path:
 
 
 def plot_unit_stiffness(ds: xr.Dataset, out: str | Path) -> Path:
-    """Bending stiffness of a unit inside the chain (FEA) and the unit model's, per pressure pair."""
-    labels = [f"({a:g}, {b:g})" for a, b in zip(ds["p_top_kpa"].values, ds["p_bottom_kpa"].values)]
-    x = np.arange(len(labels))
-    diag = ds["p_top_kpa"].values == ds["p_bottom_kpa"].values
-    fig, ax = plt.subplots(figsize=(max(5.0, 0.9 * len(labels) + 2), 3.8))
-    w = 0.38
+    """Bending stiffness of a unit inside the chain (FEA), the stiffness table and the unit model's, against the mean
+    pressure (P_T + P_B) / 2, one line per pressure difference |P_T - P_B|."""
+    pt, pb = ds["p_top_kpa"].values, ds["p_bottom_kpa"].values
+    s, d = 0.5 * (pt + pb), np.abs(pt - pb)
     k = ds["k_nm_per_deg"].values * 1e3
-    ax.bar(x - w / 2, k, w, color=np.where(diag, "C0", "C2"), label="FEA: middle unit of the chain")
-    if "k_model_nm_per_deg" in ds:
-        ax.bar(x + w / 2, ds["k_model_nm_per_deg"].values * 1e3, w, color="C1", alpha=0.8, label="unit model")
+    fit = ds["fit"].values.astype(bool) if "fit" in ds else np.ones(len(k), bool)
     solved = np.all(ds["status"].values == 0, axis=1)
-    for i in np.flatnonzero(~np.isfinite(k)):
-        # every solve converged but the middle unit did not turn: locked by contact across its gaps
-        label = "locked" if solved[i] else "failed"
-        ax.text(x[i] - w / 2, 0.0, label, rotation=90, ha="center", va="bottom", fontsize=7)
-    ax.set_xticks(x, labels, rotation=30, fontsize=8)
-    ax.set_xlabel("(P_T, P_B) kPa (blue: on the diagonal P_T = P_B)")
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for c, dd in enumerate(np.unique(d)):
+        on = d == dd
+        o = np.flatnonzero(on & fit)[np.argsort(s[on & fit])]
+        color = f"C{c % 10}"
+        name = "P_T = P_B" if dd == 0 else f"|P_T - P_B| = {dd:g} kPa"
+        ax.plot(s[o], k[o], "o-", color=color, ms=4, label=f"FEA, {name}")
+        held = np.flatnonzero(on & ~fit)
+        if held.size:
+            ax.plot(s[held], k[held], "o", mfc="none", color=color, ms=7)
+        for i in np.flatnonzero(on & ~np.isfinite(k)):
+            # every solve converged but the middle unit did not turn: locked by contact across its gaps
+            ax.annotate(
+                "locked" if solved[i] else "failed",
+                (s[i], 0.0),
+                fontsize=7,
+                color=color,
+                rotation=90,
+                ha="center",
+                va="bottom",
+            )
+    if "k_table_nm_per_deg" in ds and (~fit).any():
+        share = ds.attrs.get("heldout_moment_error_share_max", np.nan)
+        ax.plot(
+            s[~fit],
+            ds["k_table_nm_per_deg"].values[~fit] * 1e3,
+            "kx",
+            ms=7,
+            label=f"table at held-out pairs (open circles: FEA); moment error <= {100 * share:.1f} % of M_b,max",
+        )
+    if "k_model_nm_per_deg" in ds:
+        ax.plot(
+            s,
+            ds["k_model_nm_per_deg"].values * 1e3,
+            "d",
+            color="0.4",
+            ms=4,
+            label="unit model's secant spring (offset estimate near P_T = P_B)",
+        )
+    ax.set_xlabel("mean pressure (P_T + P_B) / 2 (kPa)")
     ax.set_ylabel("bending stiffness per unit (N mm / deg)")
-    ax.grid(alpha=0.3, axis="y")
+    ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title(
         f"Unit stiffness at end rotations of +-{ds.attrs['delta_deg']:g} deg per unit\n"

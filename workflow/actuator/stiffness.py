@@ -14,6 +14,12 @@ moment every unit carries, and the middle unit's backbone rotation theta_mid its
 
 M is positive in the sense of P_T bending, so it falls as the end is rotated further that way. Angles in degrees
 per unit, moments in N m for the full actuator width, pressures in kPa.
+
+`StiffnessTable` turns the measured pairs into a model of k over both pressures: the unit is its own mirror across
+the paper layer, so k(P_T, P_B) = k(P_B, P_T) and the pairs are folded onto P_T >= P_B; log k is interpolated
+linearly over their triangulation (k spans two decades between rest and co-pressure, so the logarithm keeps the
+interpolant positive and the relative error even). No extrapolation: outside the measured pairs' hull, and where the
+middle unit locked (no finite k), the table gives NaN. `heldout_errors` checks it on pairs not used to build it.
 """
 
 from __future__ import annotations
@@ -21,16 +27,26 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
+from scipy.interpolate import LinearNDInterpolator
 
 from workflow import fem
 from workflow.actuator.moment_check import unit_rotations_deg
 from workflow.actuator.unit_model import UnitModel
 from workflow.common.constants import SOLVER_STATUS
 
-__all__ = ["DEFAULT_STIFFNESS", "SOLVES", "compare_model", "rotation_stiffness", "stiffness_dataset"]
+__all__ = [
+    "DEFAULT_STIFFNESS",
+    "SOLVES",
+    "StiffnessTable",
+    "compare_model",
+    "heldout_errors",
+    "rotation_stiffness",
+    "stiffness_dataset",
+]
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +54,10 @@ log = logging.getLogger(__name__)
 DEFAULT_STIFFNESS = {
     "delta_deg": 3.0,  # chain end rotation per unit on either side of the blocked state
     "chain_units": 5,
-    "pairs_kpa": [[0.0, 0.0], [100.0, 100.0], [200.0, 200.0], [300.0, 300.0], [150.0, 0.0], [300.0, 150.0]],
+    # the table's pairs: the diagonal and 20 kPa off it, where the unit model uses the table
+    "pairs_kpa": [[0.0, 0.0], [50.0, 50.0], [100.0, 100.0], [200.0, 200.0], [300.0, 300.0], [20.0, 0.0]]
+    + [[110.0, 90.0], [210.0, 190.0], [300.0, 280.0]],
+    "heldout_kpa": [],  # pairs left out of the table, to verify it
 }
 
 #: The solves per pressure pair, in order: (name, unit-model case, end rotation in units of delta).
@@ -108,6 +127,63 @@ def rotation_stiffness(
     return out
 
 
+@dataclass(frozen=True)
+class StiffnessTable:
+    """k(P_T, P_B) in N m per degree per unit from measured pairs (kPa), symmetric in its two pressures.
+
+    Callable like the unit model's surrogates: ``table(p_top_kpa, p_bottom_kpa)`` broadcasts and returns NaN outside
+    the hull of the finite pairs (folded onto P_T >= P_B). Pairs with a NaN or non-positive k (a locked middle unit,
+    a failed solve) are left out.
+    """
+
+    p_top_kpa: np.ndarray
+    p_bottom_kpa: np.ndarray
+    k_nm_per_deg: np.ndarray
+    _interp: LinearNDInterpolator = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        pt, pb, k = (np.asarray(a, float).ravel() for a in (self.p_top_kpa, self.p_bottom_kpa, self.k_nm_per_deg))
+        if not (pt.size == pb.size == k.size):
+            raise ValueError("p_top_kpa, p_bottom_kpa and k_nm_per_deg must have one value per pair")
+        ok = np.isfinite(k) & (k > 0)
+        hi, lo = np.maximum(pt, pb)[ok], np.minimum(pt, pb)[ok]
+        pts, idx = np.unique(np.column_stack([hi, lo]), axis=0, return_index=True)
+        if len(pts) < 3 or np.linalg.matrix_rank(pts - pts.mean(axis=0)) < 2:
+            raise ValueError(
+                f"a stiffness table needs three pairs with a finite k that span both pressures, got {len(pts)}"
+            )
+        object.__setattr__(self, "_interp", LinearNDInterpolator(pts, np.log(k[ok][idx])))
+
+    def __call__(self, p_top_kpa, p_bottom_kpa) -> np.ndarray:
+        pt, pb = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float))
+        k = np.exp(self._interp(np.maximum(pt, pb).ravel(), np.minimum(pt, pb).ravel())).reshape(pt.shape)
+        return k if k.ndim else k[()]
+
+    @classmethod
+    def from_study(cls, ds: xr.Dataset) -> "StiffnessTable":
+        """The table of a ``unit_stiffness.nc`` (its fit pairs only, when it marks held-out ones)."""
+        use = ds["fit"].values.astype(bool) if "fit" in ds else np.ones(ds.sizes["pair"], bool)
+        return cls(ds["p_top_kpa"].values[use], ds["p_bottom_kpa"].values[use], ds["k_nm_per_deg"].values[use])
+
+
+def heldout_errors(
+    table: StiffnessTable, p_top_kpa, p_bottom_kpa, k_fea_nm_per_deg, delta_deg: float, m_blocked_max_nm: float
+) -> dict[str, np.ndarray]:
+    """The table against FEA pairs not used to build it.
+
+    Returns ``k_table_nm_per_deg``, ``rel_error`` (table / FEA - 1) and ``moment_error_share``: the error in the end
+    moment over the study's window, |k_table - k_FEA| * delta, as a share of the largest blocked moment of the grid
+    (``m_blocked_max_nm``, N m): how far a moment predicted within +-delta of the blocked state is off, measured
+    against the moments the unit delivers.
+    """
+    k_fea = np.asarray(k_fea_nm_per_deg, float)
+    k_tab = np.asarray(table(p_top_kpa, p_bottom_kpa), float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = k_tab / k_fea - 1.0
+    share = np.abs(k_tab - k_fea) * float(delta_deg) / float(m_blocked_max_nm)
+    return {"k_table_nm_per_deg": k_tab, "rel_error": rel, "moment_error_share": share}
+
+
 def compare_model(res: Mapping[str, np.ndarray], model: UnitModel) -> dict[str, np.ndarray]:
     """The unit model's stiffness (its secant, or the offset estimate near P_T = P_B) at the study's pairs, and its
     error against the FEA as a share of the FEA's value."""
@@ -125,8 +201,16 @@ def stiffness_dataset(
     h_mm: float,
     chain_units: int,
     model: Mapping[str, np.ndarray] | None = None,
+    fit: np.ndarray | None = None,
+    table: Mapping[str, np.ndarray] | None = None,
+    m_blocked_max_nm: float | None = None,
+    model_with_table: Mapping[str, np.ndarray] | None = None,
 ) -> xr.Dataset:
-    """``unit_stiffness.nc`` content from :func:`rotation_stiffness` (and :func:`compare_model`), no provenance."""
+    """``unit_stiffness.nc`` content from :func:`rotation_stiffness` (and :func:`compare_model`), no provenance.
+
+    ``fit`` marks the pairs the `StiffnessTable` was built on (the others are held out); ``table`` is
+    :func:`heldout_errors` at every pair, ``m_blocked_max_nm`` its moment scale; ``model_with_table`` is
+    :func:`compare_model` of the unit model that takes the table inside its window."""
     P = np.asarray(res["pairs_kpa"])
     dims = ("pair", "solve")
     flag_vals = np.array(sorted(SOLVER_STATUS), dtype="i1")
@@ -171,6 +255,35 @@ def stiffness_dataset(
             model["k_model_rel_error"],
             {"units": "1", "long_name": "unit model's stiffness / FEA's - 1"},
         )
+    if model_with_table is not None:
+        ds["k_model_table_nm_per_deg"] = (
+            "pair",
+            model_with_table["k_model_nm_per_deg"],
+            {"units": "N m / degree", "long_name": "unit model's stiffness with the table inside its window"},
+        )
+        ds["k_model_table_rel_error"] = (
+            "pair",
+            model_with_table["k_model_rel_error"],
+            {"units": "1", "long_name": "unit model's stiffness with the table / FEA's - 1"},
+        )
+    if fit is not None:
+        ds["fit"] = ("pair", np.asarray(fit, bool), {"long_name": "pair used to build the stiffness table"})
+    if table is not None:
+        ds["k_table_nm_per_deg"] = (
+            "pair",
+            table["k_table_nm_per_deg"],
+            {"units": "N m / degree", "long_name": "stiffness table (log-linear over the fit pairs, symmetric)"},
+        )
+        ds["k_table_rel_error"] = ("pair", table["rel_error"], {"units": "1", "long_name": "table / FEA - 1"})
+        ds["k_table_moment_error_share"] = (
+            "pair",
+            table["moment_error_share"],
+            {"units": "1", "long_name": "|k_table - k_FEA| delta / the grid's largest blocked moment"},
+        )
+        held = ~np.asarray(fit, bool) if fit is not None else np.zeros(len(P), bool)
+        share = np.asarray(table["moment_error_share"], float)[held]
+        ds.attrs["m_blocked_max_nm"] = float(m_blocked_max_nm)
+        ds.attrs["heldout_moment_error_share_max"] = float(np.nanmax(share)) if np.isfinite(share).any() else np.nan
     ds.attrs.update(
         delta_deg=float(delta_deg),
         h_mm=float(h_mm),

@@ -28,6 +28,12 @@ spring with stiffness k(P) = M_b(P) / theta_f(P), in N m per degree:
   first-order estimate of the limit), whenever |theta_f| < ``theta_floor_deg`` or
   the ratio is not positive; h is doubled (up to 32 times) while the offset pair
   itself has |theta_f| below the floor (a flat stretch of a KNN surrogate).
+* With a measured stiffness (``measured_stiffness``, e.g. a
+  `workflow.actuator.stiffness.StiffnessTable` from FEA of a unit inside a chain
+  at end rotations about its blocked state), k is that measurement wherever
+  |theta_f| < ``measured_window_deg`` (the rotation window it was measured
+  over) and it is defined: near the diagonal the secant is 0/0 and the offset
+  estimate a guess, while the measurement is the tangent the unit has there.
 
 Inverse queries find the first sign change of angle - target on a grid and
 refine it by bisection, vectorised over rays/directions.  On a piecewise-constant
@@ -70,6 +76,8 @@ class UnitModel:
     theta_scale_deg: float | None = None
     theta_floor_deg: float = 0.05
     offset_kpa: float = 10.0
+    measured_stiffness: ArrayFn | None = None
+    measured_window_deg: float = 3.0
 
     @classmethod
     def from_surrogate(cls, surrogate, **kwargs) -> "UnitModel":
@@ -89,7 +97,10 @@ class UnitModel:
         return np.asarray(self.blocked_moment(pt, pb), float).reshape(pt.shape)
 
     def stiffness_nm_per_deg(self, p_top_kpa, p_bottom_kpa) -> np.ndarray:
-        """Spring stiffness k = M_b / theta_f, N m per degree (limit estimate near P_T = P_B)."""
+        """Spring stiffness k = M_b / theta_f, N m per degree (limit estimate near P_T = P_B).
+
+        With ``measured_stiffness``, the measurement where |theta_f| < ``measured_window_deg``: there the zero
+        angle falls at M = k theta_f instead of M_b (within the window the two differ by the secant's error)."""
         pt, pb = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float))
         th = self.free_angle_deg(pt, pb)
         mb = self.blocked_moment_nm(pt, pb)
@@ -97,6 +108,12 @@ class UnitModel:
             k = np.asarray(mb / th, float).copy()
         ill = ~((np.abs(th) >= self.theta_floor_deg) & (k > 0) & np.isfinite(k))
         k[ill] = np.nan
+        if self.measured_stiffness is not None:
+            near = np.abs(th) < self.measured_window_deg
+            km = np.full(k.shape, np.nan)
+            km[near] = np.asarray(self.measured_stiffness(pt[near], pb[near]), float)
+            use = near & np.isfinite(km) & (km > 0)
+            k[use] = km[use]
         # Offset estimate; doubled (up to 5 times) where a flat stretch of the
         # surrogate (e.g. KNN) still gives no usable ratio.
         for attempt in range(6):
