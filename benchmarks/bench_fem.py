@@ -198,6 +198,9 @@ def richardson(h: np.ndarray, phi: np.ndarray, safety: float = 1.25) -> dict:
         if abs(p_new - p) < 1e-12:
             break
         p = p_new
+    if np.log(abs(e32 / e21)) + np.log((r21**p - s) / (r32**p - s)) < 0:
+        out["order"] = -p  # growing differences: the absolute value's root only (workflow.fidelity.analysis)
+        return out
     out.update(
         order=p, extrapolated=(r21**p * f1 - f2) / (r21**p - 1.0), gci_fine=safety * abs(e21 / f1) / (r21**p - 1.0)
     )

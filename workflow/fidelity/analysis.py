@@ -67,8 +67,8 @@ class Richardson:
     """Extrapolation from three meshes: limit, observed order, grid convergence index of the finest.
 
     ``asymptotic`` is False when the three values do not converge monotonically
-    (oscillating or diverging differences) or the order falls outside
-    [0.5, 6]: the limit is then the finest value and the GCI NaN.
+    (oscillating differences, or differences that grow under refinement) or the
+    order falls outside [0.5, 6]: the limit is then the finest value and the GCI NaN.
     """
 
     limit: float
@@ -85,6 +85,11 @@ def richardson(h: Sequence[float], f: Sequence[float], fs: float = 1.25) -> Rich
     s = sign(e32/e21), the observed order p solves
     p = |ln|e32/e21| + ln((r21^p - s)/(r32^p - s))| / ln r21 (fixed point); then
     f_ext = (r21^p f1 - f2)/(r21^p - 1) and GCI_fine = fs |e21/f1| / (r21^p - 1).
+
+    The absolute value in Celik's formula also maps differences that grow under refinement (divergence: with
+    equal ratios, |e21| > |e32|) onto a positive order; such a p does not satisfy the un-signed equation
+    e32/e21 = r21^p (r32^p - s) / (r21^p - s), so it is checked and the triple declared not asymptotic, with the
+    order negated (with equal ratios exactly the negative order of growing differences).
     """
     order = np.argsort(np.asarray(h, float))
     (h1, h2, h3), (f1, f2, f3) = np.asarray(h, float)[order], np.asarray(f, float)[order]
@@ -106,6 +111,8 @@ def richardson(h: Sequence[float], f: Sequence[float], fs: float = 1.25) -> Rich
             p = p_new
             break
         p = p_new
+    if np.log(abs(ratio)) + np.log((r21**p - s) / (r32**p - s)) < 0:  # the root of the absolute value only
+        return Richardson(float(f1), -float(p), np.nan, False)
     if not (0.5 <= p <= 6.0):
         return Richardson(float(f1), float(p), np.nan, False)
     rp = r21**p
