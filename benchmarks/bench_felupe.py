@@ -59,8 +59,11 @@ def h_eff(um) -> float:
     return float((solid.volume.sum() / solid.volume.size) ** (1.0 / um.dim))
 
 
-def solve_ours(um, formulation: str) -> dict:
-    res = fem.solve_unit(um, P_KPA[-1], 0.0, "free", False, formulation=formulation, stops=tuple(P_KPA / P_KPA[-1]))
+def solve_ours(um, formulation: str, atol: float | None = None) -> dict:
+    solver = None if atol is None else {"rtol": 0.0, "atol": atol}  # the same absolute residual as FElupe's
+    res = fem.solve_unit(
+        um, P_KPA[-1], 0.0, "free", False, formulation=formulation, stops=tuple(P_KPA / P_KPA[-1]), solver=solver
+    )
     at = {round(r["p_top_kpa"], 6): r["bending_angle_total_deg"] for r in res.history}
     row = {
         "status": res.status,
@@ -75,12 +78,12 @@ def solve_ours(um, formulation: str) -> dict:
     return row
 
 
-def solve_felupe(um, nsteps: int) -> dict:
+def solve_felupe(um, nsteps: int, atol: float | None = None) -> dict:
     from _felupe_unit import felupe_free_angles
 
     info = {}
     # partial: if its cut-back gives up, the pressures reached still count (NaN beyond)
-    ang = felupe_free_angles(um, P_KPA, fem.material_constants({}), nsteps=nsteps, info=info, partial=True)
+    ang = felupe_free_angles(um, P_KPA, fem.material_constants({}), nsteps=nsteps, info=info, partial=True, atol=atol)
     row = {
         "status": info["status"],
         "reason": info["reason"][:160],
@@ -181,6 +184,13 @@ def main(argv=None):
         help="also solve ours with formulation mixed (FElupe's technology) in these dims",
     )
     ap.add_argument("--felupe-steps", type=int, default=20, help="FElupe substeps (cut back where one fails)")
+    ap.add_argument(
+        "--atol",
+        type=float,
+        default=None,
+        help="both codes converge on this absolute residual of the free dofs (N); default: each its own "
+        "(ours 1e-6 relative to |f_ext| + |reactions|, FElupe 1e-8 relative to the reactions)",
+    )
     ap.add_argument("--append", action="store_true", help="keep the rows of the CSV already there, skip their solves")
     ap.add_argument("--tag", default="bench_felupe", help="output file stem in benchmarks/out")
     a = ap.parse_args(argv)
@@ -199,11 +209,11 @@ def main(argv=None):
                 "cells": um.mesh.t.shape[1],
             }
             solves = [
-                ("ours enhanced_paper", lambda: solve_ours(um, "enhanced_paper")),
-                ("felupe Q1", lambda: solve_felupe(um, a.felupe_steps)),
+                ("ours enhanced_paper", lambda: solve_ours(um, "enhanced_paper", a.atol)),
+                ("felupe Q1", lambda: solve_felupe(um, a.felupe_steps, a.atol)),
             ]
             if dim in a.mixed_dims:
-                solves.append(("ours mixed", lambda: solve_ours(um, "mixed")))
+                solves.append(("ours mixed", lambda: solve_ours(um, "mixed", a.atol)))
             for code, run in solves:
                 if (code, dim, float(h)) in done:
                     continue

@@ -269,7 +269,17 @@ def _fields(um):
     return p, f_all, f_sil, f_pap, f_bnd
 
 
-def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=20, info=None, partial=False):
+def _absolute_check(atol):
+    """FElupe convergence check on |r| of the active dofs <= ``atol`` (N), as ``workflow.fem`` with rtol = 0."""
+
+    def check(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None, eps=1e-3):
+        fnorm = float(np.linalg.norm(f[slice(None) if dof1 is None else dof1]))
+        return float(np.linalg.norm(dx)), fnorm, fnorm <= atol
+
+    return check
+
+
+def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=20, info=None, partial=False, atol=None):
     """Total free bending angle (deg) of the unit in FElupe at each pressure (P_B = 0).
 
     ``um`` a 2D or 3D ``UnitMesh`` (3D: half model, u_z = 0 on z = 0), ``mat``
@@ -284,7 +294,8 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
     instead of raising.  ``info`` (a dict) receives the wall time (s), the
     converged increments, the cut-backs, ``status`` (0 converged, 1 gave up),
     ``reason``, the pressure reached (kPa) and, with contact, the smallest gap
-    (mm) over the substeps.
+    (mm) over the substeps.  ``atol`` (N): converge on the absolute residual of the active dofs instead of
+    FElupe's default (1e-8 relative to the reaction forces), so that two codes stop at the same residual.
     """
     t0 = time.perf_counter()
     p, f_all, f_sil, f_pap, f_bnd = _fields(um)
@@ -328,6 +339,8 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
     cutback = felupe.plugins.CutbackPlugin(exceptions=errors)
     # PARDISO returns a perturbed solution for a singular matrix instead of failing: SuperLU with contact
     kwargs = {} if contact or _SPSOLVE is None else {"solver": _SPSOLVE}
+    if atol is not None:
+        kwargs["check"] = _absolute_check(float(atol))
     status, reason = 0, ""
     try:
         felupe.Job(steps=[step], callback=record, plugins=[cutback]).evaluate(x0=f_all, tol=1e-8, verbose=0, **kwargs)
