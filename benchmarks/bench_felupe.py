@@ -33,6 +33,7 @@ noisy: compare within one run.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -59,8 +60,10 @@ def h_eff(um) -> float:
     return float((solid.volume.sum() / solid.volume.size) ** (1.0 / um.dim))
 
 
-def solve_ours(um, formulation: str, atol: float | None = None) -> dict:
-    solver = None if atol is None else {"rtol": 0.0, "atol": atol}  # the same absolute residual as FElupe's
+def solve_ours(um, formulation: str, atol: float | None = None, solver: dict | None = None) -> dict:
+    solver = dict(solver or {})
+    if atol is not None:
+        solver.update(rtol=0.0, atol=atol)  # the same absolute residual as FElupe's
     res = fem.solve_unit(
         um, P_KPA[-1], 0.0, "free", False, formulation=formulation, stops=tuple(P_KPA / P_KPA[-1]), solver=solver
     )
@@ -191,6 +194,13 @@ def main(argv=None):
         help="both codes converge on this absolute residual of the free dofs (N); default: each its own "
         "(ours 1e-6 relative to |f_ext| + |reactions|, FElupe 1e-8 relative to the reactions)",
     )
+    ap.add_argument(
+        "--solver",
+        type=json.loads,
+        default={},
+        help="our step settings, JSON (workflow.fem DEFAULT_SOLVER keys), e.g. "
+        '\'{"predictor": true, "line_search": false, "grow_below_iter": 4}\'',
+    )
     ap.add_argument("--append", action="store_true", help="keep the rows of the CSV already there, skip their solves")
     ap.add_argument("--tag", default="bench_felupe", help="output file stem in benchmarks/out")
     a = ap.parse_args(argv)
@@ -209,11 +219,11 @@ def main(argv=None):
                 "cells": um.mesh.t.shape[1],
             }
             solves = [
-                ("ours enhanced_paper", lambda: solve_ours(um, "enhanced_paper", a.atol)),
+                ("ours enhanced_paper", lambda: solve_ours(um, "enhanced_paper", a.atol, a.solver)),
                 ("felupe Q1", lambda: solve_felupe(um, a.felupe_steps, a.atol)),
             ]
             if dim in a.mixed_dims:
-                solves.append(("ours mixed", lambda: solve_ours(um, "mixed", a.atol)))
+                solves.append(("ours mixed", lambda: solve_ours(um, "mixed", a.atol, a.solver)))
             for code, run in solves:
                 if (code, dim, float(h)) in done:
                     continue
