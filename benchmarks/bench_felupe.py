@@ -207,7 +207,8 @@ def main(argv=None):
     OUT.mkdir(parents=True, exist_ok=True)
     csv = OUT / f"{a.tag}.csv"
     rows = pd.read_csv(csv).to_dict("records") if a.append and csv.is_file() else []
-    done = {(r["code"], int(r["dim"]), float(r["h_mm"])) for r in rows}
+    setting = {"atol": np.nan if a.atol is None else a.atol, "solver": json.dumps(a.solver, sort_keys=True)}
+    done = {(r["code"], int(r["dim"]), float(r["h_mm"]), r.get("solver", "{}"), r.get("atol")) for r in rows}
     for dim, hs in ((2, a.h2), (3, a.h3)):
         for h in hs:
             um = fem.build_unit_mesh(h=h, dim=dim)
@@ -225,9 +226,9 @@ def main(argv=None):
             if dim in a.mixed_dims:
                 solves.append(("ours mixed", lambda: solve_ours(um, "mixed", a.atol, a.solver)))
             for code, run in solves:
-                if (code, dim, float(h)) in done:
+                if (code, dim, float(h), setting["solver"], setting["atol"]) in done:
                     continue
-                rows.append({"code": code, **base, **run()})
+                rows.append({"code": code, **base, **setting, **run()})
                 print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
                 pd.DataFrame(rows).to_csv(csv, index=False)  # after every solve: a long run keeps what it has
     df = pd.DataFrame(rows)

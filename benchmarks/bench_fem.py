@@ -198,7 +198,7 @@ def richardson(h: np.ndarray, phi: np.ndarray, safety: float = 1.25) -> dict:
         if abs(p_new - p) < 1e-12:
             break
         p = p_new
-    if np.log(abs(e32 / e21)) + np.log((r21**p - s) / (r32**p - s)) < 0:
+    if s > 0 and np.log(abs(e32 / e21)) + np.log((r21**p - s) / (r32**p - s)) < 0:
         out["order"] = -p  # growing differences: the absolute value's root only (workflow.fidelity.analysis)
         return out
     out.update(

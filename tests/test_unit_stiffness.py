@@ -104,6 +104,10 @@ def test_stiffness_table_is_exact_at_its_pairs_symmetric_and_never_extrapolates(
     assert table(60.0, 150.0) == pytest.approx(table(150.0, 60.0), rel=1e-14)
     assert np.isnan(table(350.0, 0.0)) and np.isnan(table(-10.0, 0.0))
     assert np.isnan(table(290.0, 290.0))  # beyond the last finite pair on the diagonal: no value, not a guess
+    # a failed pair inside the grid is left out, not kept as a NaN vertex: its neighbours' triangles cover it
+    k3 = k_of(P[:, 0], P[:, 1])
+    k3[(P[:, 0] == 200.0) & (P[:, 1] == 100.0)] = np.nan
+    assert StiffnessTable(P[:, 0], P[:, 1], k3)(200.0, 100.0) == pytest.approx(k_of(200.0, 100.0), rel=1e-12)
     with pytest.raises(ValueError, match="three pairs"):
         StiffnessTable([0.0, 100.0, 200.0], [0.0, 0.0, 0.0], [1.0, 2.0, 3.0])  # collinear
 
@@ -120,6 +124,9 @@ def test_unit_model_takes_the_measured_stiffness_inside_its_window_only():
     measured = UnitModel(angle, moment, measured_stiffness=lambda pt, pb: np.full(np.shape(pt), 5.0))
     pt, pb = np.array([100.0, 100.0, 100.0]), np.array([100.0, 80.0, 0.0])  # theta_f 0, 2, 10 deg
     assert np.allclose(measured.stiffness_nm_per_deg(pt, pb), [5.0, 5.0, 2.0])
+    # where the table has no value inside the window (outside its pairs) the secant (or its offset estimate) stays
+    gap = UnitModel(angle, moment, measured_stiffness=lambda pt, pb: np.where(np.asarray(pt) > 90.0, np.nan, 5.0))
+    assert np.allclose(gap.stiffness_nm_per_deg(pt, pb), [2.0, 2.0, 2.0])
     assert np.allclose(spring.stiffness_nm_per_deg(pt[1:], pb[1:]), 2.0)
     # at P_T = P_B the angle under a moment is -M / k_measured
     assert measured.angle_deg(150.0, 150.0, 1.0) == pytest.approx(-0.2)

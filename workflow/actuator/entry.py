@@ -277,8 +277,9 @@ def write_unit_stiffness(
     unit = fem.unit_mesh_from_config(actuator, 2)
     chain = chain_mesh(unit, int(st["chain_units"]), **fem.layer_options(actuator))
     log.info(
-        "unit stiffness: %d pressure pairs x 4 solves on a 2D chain of %d (h = %g mm, %d dofs)",
-        len(st["pairs_kpa"]),
+        "unit stiffness: %d pressure pairs (%d held out) x 4 solves on a 2D chain of %d (h = %g mm, %d dofs)",
+        len(st["pairs_kpa"]) + len(st.get("heldout_kpa") or []),
+        len(st.get("heldout_kpa") or []),
         int(st["chain_units"]),
         unit.h,
         chain.mesh.p.size,
@@ -290,12 +291,17 @@ def write_unit_stiffness(
     P, k = res["pairs_kpa"], res["k_nm_per_deg"]
     model = load_unit_model(surrogate_2d, **dict(unit_model or {})) if surrogate_2d is not None else None
     # the moment scale of the errors: the unit's largest blocked moment over the sweep's pressures (one side at
-    # 0 to p_max); without a surrogate the chain's largest over the study's pairs
+    # 0 to p_max); without a surrogate the chain's largest over the fit pairs (near the diagonal it is small, so
+    # the shares are then large: the log says which scale)
     if model is not None:
         p = np.linspace(0.0, model.p_max_kpa, 31)
         m_max = float(np.nanmax(np.abs(np.r_[model.blocked_moment_nm(p, 0.0), model.blocked_moment_nm(0.0, p)])))
+        scale = "the 2D unit's largest blocked moment"
     else:
-        m_max = float(np.nanmax(np.abs(res["moment_nm"][:, [name for name, _, _ in SOLVES].index("blocked")])))
+        blocked = [name for name, _, _ in SOLVES].index("blocked")
+        m_max = float(np.nanmax(np.abs(res["moment_nm"][fit, blocked])))
+        scale = "the chain's largest blocked moment over the fit pairs (no surrogate)"
+    log.info("unit stiffness: moment errors as a share of %s, %.4g N m", scale, m_max)
     try:
         table = StiffnessTable(P[fit, 0], P[fit, 1], k[fit])
     except ValueError as exc:  # too few pairs with a finite k: the study stands without its table

@@ -108,7 +108,7 @@ def chain_mesh(unit, chain_units: int = 5, **layers):
     """The reference chain of ``chain_units`` chambers, cut at gap centres (its ends are the backbone alone), on the
     unit's geometry and element size; ``layers``: `workflow.fem.layer_options`."""
     geom = dict(unit.geometry, n_chambers=int(chain_units))
-    return fem.build_unit_mesh(geom, h=unit.h, dim=unit.dim, end_gaps=True, **layers)
+    return fem.build_unit_mesh(geom, h=unit.h, dim=unit.dim, end_gaps=True, refine=unit.refine, **layers)
 
 
 def unit_rotations_deg(um, u: np.ndarray) -> np.ndarray:

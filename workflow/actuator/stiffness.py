@@ -17,7 +17,7 @@ per unit, moments in N m for the full actuator width, pressures in kPa.
 
 `StiffnessTable` turns the measured pairs into a model of k over both pressures: the unit is its own mirror across
 the paper layer, so k(P_T, P_B) = k(P_B, P_T) and the pairs are folded onto P_T >= P_B; log k is interpolated
-linearly over their triangulation (k spans two decades between rest and co-pressure, so the logarithm keeps the
+linearly over their triangulation (k spans 30x between rest and co-pressure, so the logarithm keeps the
 interpolant positive and the relative error even). No extrapolation: outside the measured pairs' hull, and where the
 middle unit locked (no finite k), the table gives NaN. `heldout_errors` checks it on pairs not used to build it.
 """

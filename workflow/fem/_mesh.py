@@ -275,7 +275,7 @@ def build_unit_mesh(
     g.update(dict(geom or {}))
     npap, nbase = layer_counts(g, h, paper_layers, base_layers)
     r = int(refine)
-    if r < 1:
+    if r != refine or r < 1:
         raise ValueError(f"refine must be a positive integer, got {refine!r}")
     return _chain_mesh(g, h, dim, (r * npap, r * nbase), None, end_gaps, r)
 
