@@ -113,7 +113,7 @@ def test_stiffness_table_is_exact_at_its_pairs_symmetric_and_never_extrapolates(
 
 
 def test_unit_model_takes_the_measured_stiffness_inside_its_window_only():
-    # secant k = 2 everywhere; the measurement 5 is used where |theta_f| < 3 deg, i.e. near the diagonal
+    # secant k = 2 everywhere; the measurement 5 where |theta_f| < 1.5 deg, blended into the secant up to 3 deg
     def angle(pt, pb):
         return 0.1 * (np.asarray(pt, float) - np.asarray(pb, float))
 
@@ -122,11 +122,15 @@ def test_unit_model_takes_the_measured_stiffness_inside_its_window_only():
 
     spring = UnitModel(angle, moment)
     measured = UnitModel(angle, moment, measured_stiffness=lambda pt, pb: np.full(np.shape(pt), 5.0))
-    pt, pb = np.array([100.0, 100.0, 100.0]), np.array([100.0, 80.0, 0.0])  # theta_f 0, 2, 10 deg
-    assert np.allclose(measured.stiffness_nm_per_deg(pt, pb), [5.0, 5.0, 2.0])
+    pt, pb = np.array([100.0, 100.0, 100.0, 100.0]), np.array([100.0, 90.0, 80.0, 0.0])  # theta_f 0, 1, 2, 10 deg
+    w = 2.0 * (1.0 - 2.0 / 3.0)  # the blend's weight at 2 deg
+    assert np.allclose(measured.stiffness_nm_per_deg(pt, pb), [5.0, 5.0, 5.0**w * 2.0 ** (1 - w), 2.0])
+    # continuous at the window's edge
+    edge = measured.stiffness_nm_per_deg(100.0, 100.0 - np.array([29.999, 30.001]))
+    assert abs(edge[0] - edge[1]) < 1e-3
     # where the table has no value inside the window (outside its pairs) the secant (or its offset estimate) stays
     gap = UnitModel(angle, moment, measured_stiffness=lambda pt, pb: np.where(np.asarray(pt) > 90.0, np.nan, 5.0))
-    assert np.allclose(gap.stiffness_nm_per_deg(pt, pb), [2.0, 2.0, 2.0])
+    assert np.allclose(gap.stiffness_nm_per_deg(pt, pb), 2.0)
     assert np.allclose(spring.stiffness_nm_per_deg(pt[1:], pb[1:]), 2.0)
     # at P_T = P_B the angle under a moment is -M / k_measured
     assert measured.angle_deg(150.0, 150.0, 1.0) == pytest.approx(-0.2)

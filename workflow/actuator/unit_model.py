@@ -31,8 +31,9 @@ spring with stiffness k(P) = M_b(P) / theta_f(P), in N m per degree:
 * With a measured stiffness (``measured_stiffness``, e.g. a
   `workflow.actuator.stiffness.StiffnessTable` from FEA of a unit inside a chain
   at end rotations about its blocked state), k is that measurement wherever
-  |theta_f| < ``measured_window_deg`` (the rotation window it was measured
-  over) and it is defined: near the diagonal the secant is 0/0 and the offset
+  |theta_f| < ``measured_window_deg`` / 2 (the window is the rotation it was
+  measured over) and it is defined, blended geometrically into the secant up
+  to the window's edge: near the diagonal the secant is 0/0 and the offset
   estimate a guess, while the measurement is the tangent the unit has there.
 
 Inverse queries find the first sign change of angle - target on a grid and
@@ -99,8 +100,9 @@ class UnitModel:
     def stiffness_nm_per_deg(self, p_top_kpa, p_bottom_kpa) -> np.ndarray:
         """Spring stiffness k = M_b / theta_f, N m per degree (limit estimate near P_T = P_B).
 
-        With ``measured_stiffness``, the measurement where |theta_f| < ``measured_window_deg``: there the zero
-        angle falls at M = k theta_f instead of M_b (within the window the two differ by the secant's error)."""
+        With ``measured_stiffness``, the measurement where |theta_f| < ``measured_window_deg`` / 2, the secant
+        beyond the window and a geometric blend between: there the zero angle falls at M = k theta_f instead of M_b
+        (within the window the two differ by the secant's error)."""
         pt, pb = np.broadcast_arrays(np.asarray(p_top_kpa, float), np.asarray(p_bottom_kpa, float))
         th = self.free_angle_deg(pt, pb)
         mb = self.blocked_moment_nm(pt, pb)
@@ -109,11 +111,19 @@ class UnitModel:
         ill = ~((np.abs(th) >= self.theta_floor_deg) & (k > 0) & np.isfinite(k))
         k[ill] = np.nan
         if self.measured_stiffness is not None:
-            near = np.abs(th) < self.measured_window_deg
+            # the measurement inside half the window, the secant outside it, blended geometrically between (no jump
+            # in k at the window's edge for an inverse to mistake for a crossing); the measurement alone where the
+            # secant is ill-conditioned
+            win = self.measured_window_deg
+            near = np.abs(th) < win
             km = np.full(k.shape, np.nan)
             km[near] = np.asarray(self.measured_stiffness(pt[near], pb[near]), float)
             use = near & np.isfinite(km) & (km > 0)
-            k[use] = km[use]
+            w = np.clip(2.0 * (1.0 - np.abs(th) / win), 0.0, 1.0)
+            w = np.where(np.isfinite(k), w, 1.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                blend = np.exp(w * np.log(km) + (1.0 - w) * np.log(np.where(np.isfinite(k), k, 1.0)))
+            k[use] = blend[use]
         # Offset estimate; doubled (up to 5 times) where a flat stretch of the
         # surrogate (e.g. KNN) still gives no usable ratio.
         for attempt in range(6):
