@@ -152,3 +152,23 @@ def test_stiffness_table_reproduces_heldout_fea_pairs(chain):
     # and a table with the wrong trend (k halved at 60 kPa) fails the same check
     wrong = StiffnessTable(P[:3, 0], P[:3, 1], k[:3] * np.array([1.0, 0.5, 0.5]))
     assert np.abs(heldout_errors(wrong, P[3:, 0], P[3:, 1], k[3:], 1.0, m_max)["rel_error"]).max() > 0.1
+
+
+def test_table_from_a_study_dataset_uses_its_fit_pairs_only():
+    g = np.array([0.0, 100.0, 200.0])
+    P = np.array([(a, b) for a in g for b in g if a >= b] + [[150.0, 50.0]])
+    k = np.exp(0.01 * P[:, 0] + 0.002 * P[:, 1])
+    k[-1] = 99.0  # a held-out pair far off the trend: used, it would move the table there
+    res = {
+        "pairs_kpa": P,
+        "k_nm_per_deg": k,
+        "moment_nm": np.zeros((len(P), len(SOLVES))),
+        "mid_angle_deg": np.zeros((len(P), len(SOLVES))),
+        "status": np.zeros((len(P), len(SOLVES)), dtype=np.int8),
+        "load_factor": np.ones((len(P), len(SOLVES))),
+        "wall_time_s": np.zeros((len(P), len(SOLVES))),
+    }
+    fit = np.arange(len(P)) < len(P) - 1
+    ds = stiffness_dataset(res, delta_deg=3.0, h_mm=1.0, chain_units=5, fit=fit)
+    table = StiffnessTable.from_study(ds)
+    assert table(150.0, 50.0) == pytest.approx(np.exp(1.5 + 0.1), rel=1e-12)
