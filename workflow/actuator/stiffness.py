@@ -244,28 +244,18 @@ def stiffness_dataset(
         },
         coords={"solve": [s[0] for s in SOLVES]},
     )
-    if model is not None:
-        ds["k_model_nm_per_deg"] = (
-            "pair",
-            model["k_model_nm_per_deg"],
-            {"units": "N m / degree", "long_name": "unit model's stiffness (secant; offset estimate near P_T = P_B)"},
-        )
-        ds["k_model_rel_error"] = (
-            "pair",
-            model["k_model_rel_error"],
-            {"units": "1", "long_name": "unit model's stiffness / FEA's - 1"},
-        )
-    if model_with_table is not None:
-        ds["k_model_table_nm_per_deg"] = (
-            "pair",
-            model_with_table["k_model_nm_per_deg"],
-            {"units": "N m / degree", "long_name": "unit model's stiffness with the table inside its window"},
-        )
-        ds["k_model_table_rel_error"] = (
-            "pair",
-            model_with_table["k_model_rel_error"],
-            {"units": "1", "long_name": "unit model's stiffness with the table / FEA's - 1"},
-        )
+    # the unit model's stiffness as it stands and with the table inside its window (compare_model of each)
+    for key, cmp, what in (
+        ("k_model", model, "unit model's stiffness (secant; offset estimate near P_T = P_B)"),
+        ("k_model_table", model_with_table, "unit model's stiffness with the table inside its window"),
+    ):
+        if cmp is not None:
+            ds[f"{key}_nm_per_deg"] = ("pair", cmp["k_model_nm_per_deg"], {"units": "N m / degree", "long_name": what})
+            ds[f"{key}_rel_error"] = (
+                "pair",
+                cmp["k_model_rel_error"],
+                {"units": "1", "long_name": f"{what} / FEA's - 1"},
+            )
     if fit is not None:
         ds["fit"] = ("pair", np.asarray(fit, bool), {"long_name": "pair used to build the stiffness table"})
     if table is not None:
