@@ -10,9 +10,14 @@ Cases (P_B = 0, contact on, the workflow's element technology and solver unless 
   60 / 180 / 300 kPa and their change against rtol = 1e-8;
 * the 3D unit at h = 2 mm (the 3D sweeps' mesh), free, one ray to 300 kPa (``--no-3d`` leaves it out).
 
-Each case runs in its own process with one BLAS / MKL thread.  Results: ``benchmarks/out/bench_newton.{json,md}``.
+With ``--compare-lag`` each ray at the default tolerance runs twice in one run, with the tangent's volumetric
+initial-stress pressure taken from the actual element volume and from the lagged (linearised) one (the default,
+``workflow.fem._assembly.LAGGED_PRESSURE``), the 3D blocked ray added: same values, and the ratio of the two times.
 
-    python benchmarks/bench_newton.py [--no-3d]
+Each case runs in its own process with one BLAS / MKL thread.  Results: ``benchmarks/out/bench_newton.{json,md}``
+(``bench_newton_lag.{json,md}`` with ``--compare-lag``).
+
+    python benchmarks/bench_newton.py [--no-3d] [--compare-lag]
 """
 
 from __future__ import annotations
@@ -41,11 +46,14 @@ TARGETS = {
 }
 
 
-def _case(dim: int, h: float, case: str, solver: dict, queue) -> None:
+def _case(dim: int, h: float, case: str, solver: dict, lag: bool | None, queue) -> None:
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"
     from workflow import fem
-    from workflow.fem import _linsolve
+    from workflow.fem import _assembly, _linsolve
+
+    if lag is not None:
+        _assembly.LAGGED_PRESSURE = lag
 
     t0 = time.perf_counter()
     res = fem.solve_unit({"dim": dim, "h": h}, 300.0, 0.0, case=case, contact=True, solver=solver, stops=STOPS)
@@ -60,6 +68,7 @@ def _case(dim: int, h: float, case: str, solver: dict, queue) -> None:
             "dim": dim,
             "h_mm": h,
             "case": case,
+            "lagged_pressure": bool(_assembly.LAGGED_PRESSURE),
             "rtol": solver.get("rtol", fem.DEFAULT_SOLVER["rtol"]),
             "status": int(res.status),
             "load_factor": float(res.load_factor),
@@ -76,10 +85,10 @@ def _case(dim: int, h: float, case: str, solver: dict, queue) -> None:
     )
 
 
-def run_case(dim: int, h: float, case: str, solver: dict | None = None) -> dict:
+def run_case(dim: int, h: float, case: str, solver: dict | None = None, lag: bool | None = None) -> dict:
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
-    proc = ctx.Process(target=_case, args=(dim, h, case, dict(solver or {}), q))
+    proc = ctx.Process(target=_case, args=(dim, h, case, dict(solver or {}), lag, q))
     proc.start()
     out = q.get()
     proc.join()
@@ -111,11 +120,44 @@ def _markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _lag_markdown(rows: list[dict]) -> str:
+    lines = [
+        "| case | volumetric pressure in the tangent | reached | steps | cut-backs | iterations (all attempts) "
+        "| median it./step | wall s | value at 300 kPa | time ratio lagged / actual |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    by = {(r["dim"], r["case"], r["lagged_pressure"]): r for r in rows}
+    for r in rows:
+        other = by.get((r["dim"], r["case"], False))
+        ratio = f"{r['wall_s'] / other['wall_s']:.2f}" if r["lagged_pressure"] and other else ""
+        v = r["value_at_kpa"].get("300")
+        lines.append(
+            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | {'lagged' if r['lagged_pressure'] else 'actual'} | "
+            f"{100 * r['load_factor']:.0f} % | {r['steps']} | {r['cutbacks']} | {r['iterations_accepted']} "
+            f"({r['iterations_all']}) | {r['median_iterations']:g} | {r['wall_s']:.1f} | "
+            f"{'stopped' if v is None else f'{v:.7g}'} | {ratio} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--no-3d", action="store_true", help="leave out the 3D ray")
+    ap.add_argument("--no-3d", action="store_true", help="leave out the 3D rays")
+    ap.add_argument("--compare-lag", action="store_true", help="each ray with the actual and the lagged pressure")
     args = ap.parse_args(argv)
     rows = []
+    if args.compare_lag:
+        cases = [(2, 1.0, "free"), (2, 1.0, "blocked")] + (
+            [] if args.no_3d else [(3, 2.0, "free"), (3, 2.0, "blocked")]
+        )
+        for dim, h, case in cases:
+            for lag in (False, True):
+                rows.append(run_case(dim, h, case, {}, lag))
+        OUT.mkdir(parents=True, exist_ok=True)
+        (OUT / "bench_newton_lag.json").write_text(json.dumps({"targets": TARGETS, "rows": rows}, indent=2))
+        (OUT / "bench_newton_lag.md").write_text(_lag_markdown(rows))
+        print(_lag_markdown(rows))
+        return 0
     for case in ("free", "blocked"):
         for rtol in TOLERANCES:
             rows.append(run_case(2, 1.0, case, {"rtol": rtol}))

@@ -41,7 +41,7 @@ def _tangent_error(solid, u):
     for j in range(solid.ndofs):
         e = np.zeros(solid.ndofs)
         e[j] = EPS
-        K_fd[:, j] = (solid.assemble(u + e, False)[0] - solid.assemble(u - e, False)[0]) / (2 * EPS)
+        K_fd[:, j] = (solid.assemble(u + e, False)[0] - solid.assemble(u - e, False)[0])[: solid.ndofs] / (2 * EPS)
     return np.abs(K - K_fd).max() / np.abs(K).max()
 
 
@@ -70,7 +70,7 @@ def test_residual_is_energy_gradient(dim, mixed):
     f, _, _ = solid.assemble(u, False)
     du = EPS * np.random.default_rng(2).standard_normal(u.size)
     dE = (solid.energy(u + du) - solid.energy(u - du)) / 2
-    assert dE == pytest.approx(f @ du, rel=1e-6)
+    assert dE == pytest.approx(f[: u.size] @ du, rel=1e-6)
 
 
 def test_unknown_material_id_is_an_error():
@@ -143,7 +143,7 @@ def test_enhanced_strains_condense_exactly(dim):
     # is the energy's gradient in the full state, and along [du; recover(du)] the nodal residual changes by
     # K_c du + correction while r_alpha changes by -r_alpha (the Newton step of the static condensation)
     mesh, material, u = _deformed_mesh(dim)
-    solid = fem.SolidAssembler(mesh, material, MAT, enhanced=(0, 1, 2))
+    solid = fem.SolidAssembler(mesh, material, MAT, enhanced=(0, 1, 2), lagged_pressure=False)
     rng = np.random.default_rng(dim)
     state = np.concatenate([u, 0.01 * rng.standard_normal(solid.n_internal)])
     assert solid.n_internal == dim * dim * mesh.t.shape[1]
@@ -218,5 +218,73 @@ def test_newton_forms_no_tangent_at_an_iterate_the_line_search_already_found_con
 
     monkeypatch.setattr(_solve.Model, "evaluate", counted)
     res = fem.solve_unit(fem.build_unit_mesh(h=2.0, dim=2), 60.0, 0.0, "free", False)
-    assert res.status == 0 and res.steps > 10
+    assert res.status == 0 and res.steps >= 5
     assert calls[True] < res.newton_iterations + res.steps // 2
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_lagged_pressure_changes_the_tangent_only_where_the_dilatation_is_not_the_actual_one(dim):
+    # at a state whose lagged dilatations are the actual ones (what ``state`` builds) the lagged tangent is the
+    # exact one; with other lagged values only the tangent's initial-stress term moves, never the residual
+    mesh, material, u = _deformed_mesh(dim)
+    exact = fem.SolidAssembler(mesh, material, MAT, lagged_pressure=False)
+    lagged = fem.SolidAssembler(mesh, material, MAT, lagged_pressure=True)
+    n_sil = int(np.sum(material == 0))
+    assert lagged.n_internal == n_sil and exact.n_internal == 0
+    f0, k0, _ = exact.assemble(u)
+    state = lagged.state(u)
+    f1, k1, _ = lagged.assemble(state)
+    np.testing.assert_allclose(f1[: lagged.ndofs], f0, rtol=0, atol=1e-12 * np.abs(f0).max())
+    np.testing.assert_array_equal(f1[lagged.ndofs :], 0.0)
+    np.testing.assert_allclose(k1, k0, rtol=0, atol=1e-12 * np.abs(k0).max())
+    shifted = state.copy()
+    shifted[lagged.ndofs :] += 0.01
+    f2, k2, _ = lagged.assemble(shifted)
+    np.testing.assert_array_equal(f2[: lagged.ndofs], f1[: lagged.ndofs])
+    assert np.abs(k2 - k1).max() > 1e-3 * np.abs(k1).max()
+
+
+@pytest.mark.parametrize("enhanced", [(), (0, 1, 2)])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_lagged_dilatation_is_the_linearised_volume(dim, enhanced):
+    # after a tangent assembly, recover(du) moves each element's lagged dilatation to (v + h . dq) / V (dq the
+    # element's nodal and enhanced increments), whose distance to the actual dilatation at the new state
+    # shrinks with the step squared
+    mesh, material, u = _deformed_mesh(dim)
+    solid = fem.SolidAssembler(mesh, material, MAT, enhanced=enhanced, lagged_pressure=True)
+    rng = np.random.default_rng(7)
+    state = solid.state(u)
+    n = solid.ndofs
+    lag = np.concatenate(list(solid.theta_dofs.values()))
+    alpha = np.setdiff1d(np.arange(n, solid.nstate), lag)
+    for _ in range(20):  # enhanced parameters in equilibrium at u (damped Newton on r_alpha): recover linear in du
+        solid.assemble(state)
+        step = np.zeros(state.size)
+        step[alpha] = solid.recover(np.zeros(n))[alpha - n]
+        while solid.assemble(state + step, False)[2] < 0.1:  # no element inverted
+            step /= 2
+        state += step
+    assert np.abs(solid.assemble(state, False)[0][alpha]).max(initial=0.0) < 1e-9
+    state[lag] = solid.dilatation(state)
+    solid.assemble(state)
+    du = rng.standard_normal(n)
+    err = []
+    for eps in (1e-2, 5e-3):
+        d_int = solid.recover(eps * du)
+        new = state + np.concatenate([eps * du, d_int])
+        err.append(np.abs(new[lag] - solid.dilatation(new)).max())
+    assert err[1] == pytest.approx(err[0] / 4, rel=0.05)
+
+
+def test_lagged_pressure_reaches_the_same_unit_angle_in_fewer_iterations(monkeypatch):
+    # the 2D unit without contact to 300 kPa: the same free angle (one discrete problem), and Newton on the
+    # lagged pressure avoids the cut-backs the exact element's initial-stress term causes (measured: 499 -> 97)
+    um = fem.build_unit_mesh(h=1.0, dim=2)
+    out = {}
+    for lag in (False, True):
+        monkeypatch.setattr(_assembly, "LAGGED_PRESSURE", lag)
+        res = fem.solve_unit(um, 300.0, 0.0, "free", False)
+        assert res.status == 0
+        out[lag] = (res.bending_angle_deg, res.newton_iterations)
+    assert out[True][0] == pytest.approx(out[False][0], rel=1e-6)
+    assert out[True][1] < 0.5 * out[False][1]

@@ -98,8 +98,8 @@ def test_segment_projection_reduces_to_the_closest_point_on_a_straight_wall():
 
 @pytest.fixture(scope="module")
 def pressed_unit():
-    """A 2D unit (h = 2 mm) at 150 kPa with contact: walls pressed together."""
-    um = fem.build_unit_mesh(h=2.0, dim=2)
+    """A 2D unit (h = 1 mm) at 150 kPa with contact: walls pressed together."""
+    um = fem.build_unit_mesh(h=1.0, dim=2)
     res = fem.solve_unit(um, 150.0, 0.0, "free", True, keep_displacement=True)
     assert res.status == 0
     model = fem.unit_model(um, 150.0, 0.0, "free", True)

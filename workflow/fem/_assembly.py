@@ -10,7 +10,21 @@ FElupe's ``SolidBodyNearlyIncompressible``):
 
 so the residual is  int P_iso : dF + p_e int cof F : dF  with p_e = U'(Jb_e),
 and the exact tangent adds  p_e int dF : d2J : DF  and the rank-one element
-term  U''/V_e (int cof F : dF)(int cof F : DF).  The paper layer (and any
+term  U''/V_e (int cof F : dF)(int cof F : DF).
+
+Newton's path (``lagged_pressure``, default on): the residual always takes
+p_e from the actual element volume, but the tangent's initial-stress term
+takes it from the dilatation linearised at the previous iterate,
+Jb_lin = (v + h . du) / V (h = int cof F : dF/du, v = int J dV), carried per
+element in the solver's state.  This is the Newton step of the three-field
+form with the cell's dilatation and pressure as unknowns of their own
+(FElupe's ``SolidBodyNearlyIncompressible`` updates them the same way): after
+a large correction the actual volume of a ballooning thin wall can sit far
+off the linearisation, and K (Jb - 1), with K = 1000 mu0, then puts a large
+spurious initial stress into the next tangent, which sends the next
+correction into inverted elements.  The converged solution is the same.
+
+The paper layer (and any
 further material id listed in ``mat["neo_hooke"]``) is a displacement element
 with a compressible neo-Hooke law (Poisson's ratio 0.2 does not lock).
 
@@ -68,6 +82,9 @@ from ._material import det_inv, mooney_rivlin_isochoric, neo_hooke_compressible
 __all__ = ["SolidAssembler", "Pattern", "vector_dofs", "gradient_operator", "enhanced_gradients"]
 
 SILICONE, PAPER = 0, 1
+#: Default of ``SolidAssembler(lagged_pressure=...)``; a study flips it to compare the two Newton paths
+#: (``benchmarks/bench_newton.py --compare-lag``).
+LAGGED_PRESSURE = True
 
 
 def vector_dofs(nodes: np.ndarray, dim: int) -> np.ndarray:
@@ -152,6 +169,13 @@ class SolidAssembler:
         Material ids with enhanced (incompatible-mode) strains, Q1/E4 and
         H1/E9 (see the module docstring); empty = plain Q1, which shear-locks
         in bending.
+    lagged_pressure : bool, optional
+        Default ``LAGGED_PRESSURE`` (True).  Mixed silicone only: the pressure in the tangent's initial-stress term
+        p_e int dF : d2J : DF is K (Jb_lin - 1), with Jb_lin the element
+        dilatation linearised from the previous iterate, (v + h . du) / V
+        (an internal state variable per element), instead of U'(Jb_e) of the
+        actual volume (see the module docstring).  The residual is unchanged,
+        so is the solution; only Newton's path differs.
     chunk_points : int
         Quadrature points per vectorised batch (keeps the 4th-order tangents
         in cache).
@@ -173,6 +197,7 @@ class SolidAssembler:
         chunk_points: int = 2048,
         threads: int | None = None,
         enhanced=(),
+        lagged_pressure: bool | None = None,
     ):
         self.dim = mesh.p.shape[0]
         elem = skfem.ElementQuad1() if self.dim == 2 else skfem.ElementHex1()
@@ -211,9 +236,17 @@ class SolidAssembler:
                     )
                     n_int += part.size * na
                 self.chunks.append((int(gid), part))
+        self.lagged = bool((LAGGED_PRESSURE if lagged_pressure is None else lagged_pressure) and mixed)
+        self.theta_dofs = {}  # silicone chunk -> (e,) positions of Jb_lin - 1 in the state (lagged pressure)
+        if self.lagged:
+            for k, (gid, part) in enumerate(self.chunks):
+                if gid == SILICONE:
+                    self.theta_dofs[k] = self.ndofs + n_int + np.arange(part.size)
+                    n_int += part.size
         self.n_internal = n_int
         self.nstate = self.ndofs + n_int
         self._condensed: dict[int, np.ndarray] = {}  # chunk -> K_aa^-1 [K_au | r_a] of the last tangent assembly
+        self._theta: dict[int, tuple] = {}  # silicone chunk -> (h / V, v / V - 1 - state) of the last tangent assembly
         self._correction = np.zeros(self.ndofs)  # -K_ua K_aa^-1 r_a of the last tangent assembly
         nl = self.edofs.shape[1]
         self.rows = np.repeat(self.edofs, nl, axis=1).ravel()
@@ -250,13 +283,31 @@ class SolidAssembler:
         return K * (J - 1.0), K
 
     def state(self, u: np.ndarray) -> np.ndarray:
-        """The full state (nstate,) from nodal displacements (enhanced parameters 0) or a state itself."""
+        """The full state (nstate,) from nodal displacements (enhanced parameters 0, lagged dilatations the
+        actual ones) or a state itself."""
         u = np.asarray(u, float)
         if u.size == self.nstate:
             return u
         if u.size != self.ndofs:
             raise ValueError(f"expected {self.ndofs} nodal values or a state of {self.nstate}, got {u.size}")
-        return np.concatenate([u, np.zeros(self.n_internal)])
+        full = np.concatenate([u, np.zeros(self.n_internal)])
+        if self.theta_dofs:  # the lagged dilatations start at the actual ones
+            full[np.concatenate(list(self.theta_dofs.values()))] = self.dilatation(full)
+        return full
+
+    def dilatation(self, state: np.ndarray) -> np.ndarray:
+        """The actual mean dilatation Jb_e - 1 = v_e / V_e - 1 of the state's silicone elements, in the order of
+        the lagged-pressure variables (empty without them)."""
+        out = []
+        for k, pos in self.theta_dofs.items():
+            cells = self.chunks[k][1]
+            G, q = self.G[:, :, cells], state[self.edofs[cells]]
+            if k in self.internal_dofs:
+                G = np.concatenate([G, self.G_enh[:, :, cells]], axis=0)
+                q = np.concatenate([q, state[self.internal_dofs[k]]], axis=1)
+            J, _ = det_inv(self._deformation(q, G))
+            out.append(np.einsum("eq,eq->e", J, self.dx[cells]) / self.volume[cells] - 1.0)
+        return np.concatenate(out) if out else np.zeros(0)
 
     def assemble(self, u: np.ndarray, tangent: bool = True):
         """Return ``(f (nstate,), K values (in COO order of rows/cols) or None, min J)``.
@@ -285,10 +336,12 @@ class SolidAssembler:
         else:
             results = map(run, range(len(self.chunks)))
         corr = np.zeros(self.ndofs) if tangent else None
-        for k, (fe, Ke, jc, extra) in results:
+        for k, (fe, Ke, jc, extra, theta) in results:
             jmin = min(jmin, jc)
             if fe is None:
                 continue
+            if theta is not None:
+                self._theta[k] = theta
             cells = self.chunks[k][1]
             f += np.bincount(self.edofs[cells].ravel(), weights=fe[:, :nl].ravel(), minlength=self.nstate)
             if extra is not None:  # enhanced chunk: r_alpha, condensation
@@ -318,31 +371,53 @@ class SolidAssembler:
             due = du[self.edofs[self.chunks[k][1]]]
             nl = due.shape[1]
             out[self.internal_dofs[k] - self.ndofs] = -(np.einsum("eal,el->ea", X[:, :, :nl], due) + X[:, :, nl])
+        for k, (hV, off) in self._theta.items():
+            dq = du[self.edofs[self.chunks[k][1]]]
+            if k in self.internal_dofs:
+                dq = np.concatenate([dq, out[self.internal_dofs[k] - self.ndofs]], axis=1)
+            out[self.theta_dofs[k] - self.ndofs] = off + np.einsum("ea,ea->e", hV, dq)
         return out
 
     def _chunk(self, k: int, u: np.ndarray, tangent: bool):
         """Chunk ``k``: local forces (e, nl [+ d*d]), condensed local tangents (e, nl, nl) or None, min J,
-        and for enhanced chunks with a tangent (K_aa^-1 [K_au | r_a], -K_ua K_aa^-1 r_a)."""
+        for enhanced chunks with a tangent (K_aa^-1 [K_au | r_a], -K_ua K_aa^-1 r_a), and for lagged-pressure
+        chunks with a tangent (h / V (e, nl [+ d*d]), v / V - 1 - state (e,)) (else None)."""
         gid, cells = self.chunks[k]
         ue = u[self.edofs[cells]]
         G, dx, V = self.G[:, :, cells], self.dx[cells], self.volume[cells]
+        p_geo = None
+        if k in self.theta_dofs:
+            p_geo = self.mat["bulk"] * u[self.theta_dofs[k]][:, None]
         if gid not in self.enhanced:
-            fe, Ke, je = self._element(gid, G, dx, V, ue, tangent)
-            return fe, Ke, float(je.min()), None
+            fe, Ke, je, vol = self._element(gid, G, dx, V, ue, tangent, p_geo)
+            return fe, Ke, float(je.min()), None, self._theta_update(k, u, vol, V)
         nl = ue.shape[1]
         G = np.concatenate([G, self.G_enh[:, :, cells]], axis=0)
         q = np.concatenate([ue, u[self.internal_dofs[k]]], axis=1)
-        fe, Ke, je = self._element(gid, G, dx, V, q, tangent)
+        fe, Ke, je, vol = self._element(gid, G, dx, V, q, tangent, p_geo)
         if fe is None or not tangent:
-            return fe, None, float(je.min()), ()
+            return fe, None, float(je.min()), (), None
         ra = fe[:, nl:]
         X = np.linalg.solve(Ke[:, nl:, nl:], np.concatenate([Ke[:, nl:, :nl], ra[:, :, None]], axis=2))
         Kua = Ke[:, :nl, nl:]
         Kc = Ke[:, :nl, :nl] - Kua @ X[:, :, :nl]
-        return fe, Kc, float(je.min()), (X, -(Kua @ X[:, :, nl:])[:, :, 0])
+        return fe, Kc, float(je.min()), (X, -(Kua @ X[:, :, nl:])[:, :, 0]), self._theta_update(k, u, vol, V)
 
-    def _element(self, gid: int, G: np.ndarray, dx: np.ndarray, V: np.ndarray, q: np.ndarray, tangent: bool):
-        """Forces (e, nb*d), tangents (e, nb*d, nb*d) or None and min J per element (e,) for local values q (e, nb*d)."""
+    def _theta_update(self, k: int, u: np.ndarray, vol, V: np.ndarray):
+        """(h / V, v / V - 1 - state) of a lagged-pressure chunk's tangent assembly, so that
+        Jb_lin - 1 = v / V - 1 + (h / V) . dq after a correction dq (None elsewhere)."""
+        if vol is None or k not in self.theta_dofs:
+            return None
+        h, v = vol
+        return h / V[:, None], v / V - 1.0 - u[self.theta_dofs[k]]
+
+    def _element(
+        self, gid: int, G: np.ndarray, dx: np.ndarray, V: np.ndarray, q: np.ndarray, tangent: bool, p_geo=None
+    ):
+        """Forces (e, nb*d), tangents (e, nb*d, nb*d) or None, min J per element (e,) for local values q (e, nb*d),
+        and for the mixed silicone with a tangent (h = int cof F : dF/dq (e, nb*d), v = int J dV (e,)), else None.
+
+        ``p_geo`` (e, 1): the pressure of the tangent's initial-stress term (MPa; default the element's own)."""
         d = self.dim
         nb = G.shape[0]
         nl = nb * d
@@ -350,7 +425,7 @@ class SolidAssembler:
         J, Finv = det_inv(F)
         je = J.min(axis=1)
         if not je.min() > 0:
-            return None, None, je
+            return None, None, je, None
         _, P, A = self._law(gid, F, tangent)
         if gid == SILICONE:
             p, dp = self._volumetric(J, dx, V)
@@ -358,19 +433,22 @@ class SolidAssembler:
             P = P + p * cof
         fe = np.einsum("ijeq,ajeq,eq->eai", P, G, dx).reshape(q.shape[0], nl)
         if not tangent:
-            return fe, None, je
+            return fe, None, je, None
         ne, nq = dx.shape
         B = gradient_operator(G)
         # (e, q, d*d, d*d) in C order, so that the batched products run on contiguous matrices
         Aq = np.multiply(np.moveaxis(A.reshape(d * d, d * d, ne, nq), (0, 1), (2, 3)), dx[:, :, None, None], order="C")
         Bt = B.reshape(ne, nq * d * d, nl).transpose(0, 2, 1)
         Ke = Bt @ (Aq @ B).reshape(ne, nq * d * d, nl)
+        vol = None
         if gid == SILICONE:
-            Ke += self._volumetric_tangent(B, cof, J, p, dp, dx, V, nb)
-        return fe, Ke, je
+            dKe, vol = self._volumetric_tangent(B, cof, J, p if p_geo is None else p_geo, dp, dx, V, nb)
+            Ke += dKe
+        return fe, Ke, je, vol
 
     def _volumetric_tangent(self, B, cof, J, p, dp, dx, V, nb):
-        """Local tangent (e, nl, nl) of the volumetric part of the silicone.
+        """Local tangent (e, nl, nl) of the volumetric part of the silicone, and (h, v) of the mean dilatation
+        (h = sum_q dx c, v = sum_q dx J; None without it).
 
         With c = B^T cof (the gradient of J at a point), p d2J contracts to
         (p/J) (c_ai c_bk - c_ak c_bi), and U'' gives the rank-one term
@@ -384,9 +462,9 @@ class SolidAssembler:
         if self.mixed:
             cb = np.einsum("eqa,eq->ea", c, dx)
             Ke += (dp / V)[:, None, None] * cb[:, :, None] * cb[:, None, :]
-        else:
-            Ke += (c.transpose(0, 2, 1) * (dp * dx)[:, None, :]) @ c
-        return Ke
+            return Ke, (cb, np.einsum("eq,eq->e", J, dx))
+        Ke += (c.transpose(0, 2, 1) * (dp * dx)[:, None, :]) @ c
+        return Ke, None
 
     def energy(self, u: np.ndarray) -> float:
         """Total strain energy (N mm; per mm of width in 2D) of the state ``u``, for checks."""

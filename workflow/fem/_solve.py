@@ -51,8 +51,8 @@ DEFAULT_SOLVER = {
     "rtol": 1.0e-6,  # |r| <= rtol * (|f_ext| + |reactions|)
     "atol": 1.0e-10,  # N
     # first guess of a step: True extrapolates the last increment, None by dimension (measured on the unit's rays,
-    # docs/fea.md): in 2D it saves 30 % of the free ray's iterations; in 3D the extrapolated ballooning walls
-    # violate the near-incompressibility, start Newton 1000x above the load increment and stall the ray
+    # docs/fea.md): in 2D it saves 30 % of the free ray's iterations; in 3D the contact steps cut back more with it
+    # (2 mm free ray: 748 against 557 iterations; without contact and with the lagged volumetric pressure it pays)
     "predictor": None,
     "line_search": True,  # Matthies-Strang line search on the Newton correction
     # a path that stops compares the tangent's eigenvalue nearest zero at its last converged state with the one at
@@ -432,6 +432,8 @@ def solve_path(
         u = np.zeros(model.nstate)
     elif np.size(u0) == model.nstate:
         u = np.array(u0, float)
+    elif hasattr(model.solid, "state"):
+        u = model.solid.state(np.asarray(u0, float))
     else:
         u = np.concatenate([np.asarray(u0, float), np.zeros(model.nstate - model.n)])
     u_prev, u_start = u.copy(), u.copy()
