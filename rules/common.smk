@@ -236,6 +236,12 @@ def get_fea_surrogates(wildcards):
     return {f"surrogate_{f}": f"results/actuator/surrogate_{f}.joblib" for f in ("2d", "3d")}
 
 
+def get_check_stiffness(wildcards):
+    """Input function: the unit's measured stiffness table when fea_check.unit_stiffness is on (the check's 2D
+    chain takes it near P_T = P_B), else nothing."""
+    return {"unit_stiffness": "results/actuator/unit_stiffness.nc"} if config["fea_check"].get("unit_stiffness") else {}
+
+
 def get_calibration_patient():
     """Whose finger the chain's calibration runs on (cascade.calibration.patient, else the validation patient)."""
     c = config["cascade"]

@@ -4,6 +4,7 @@
 # workflow/fea_check/entry.py; the FE models in workflow/fem. Input functions live in rules/common.smk:
 #   get_fea_exercises()      -> the exercises checked (config fea_check.exercises or all)
 #   get_fea_surrogates()     -> {"surrogate_2d": ..., "surrogate_3d": ...}
+#   get_check_stiffness()    -> {"unit_stiffness": ...} when fea_check.unit_stiffness, else {}
 #   get_fea_check_slice(wc)  -> the config a patient's check depends on
 #   get_standalone_parts(wc) -> the stand-alone exercises solved apart (one job each: two 3D solves run at once)
 #   CHECKED                  -> the patients the default run checks (fea_check.patients); check_<patient> for any
@@ -14,6 +15,7 @@ rule fea_check:
     input:
         unpack(get_fea_surrogates),
         unpack(get_check_choice),
+        unpack(get_check_stiffness),
         plan="results/patients/{patient}/cascade_plan.nc",
         ccd="results/doe/ccd.nc",
         moments="results/musculoskeletal/moments.nc",

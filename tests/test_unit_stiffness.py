@@ -172,3 +172,37 @@ def test_table_from_a_study_dataset_uses_its_fit_pairs_only():
     ds = stiffness_dataset(res, delta_deg=3.0, h_mm=1.0, chain_units=5, fit=fit)
     table = StiffnessTable.from_study(ds)
     assert table(150.0, 50.0) == pytest.approx(np.exp(1.5 + 0.1), rel=1e-12)
+
+
+def test_the_fea_checks_2d_chain_takes_the_table_of_a_study_file(tmp_path):
+    # fea_check.unit_stiffness: the check reads unit_stiffness.nc and its 2D unit takes the table inside the
+    # study's window only; no file (the switch off) leaves the unit model as it was
+    from workflow.common.provenance import write_dataset
+    from workflow.fea_check.entry import with_measured_stiffness
+
+    g = np.array([0.0, 100.0, 200.0])
+    P = np.array([(a, b) for a in g for b in g if a >= b])
+    k = np.exp(0.01 * P[:, 0] + 0.002 * P[:, 1])
+    res = {
+        "pairs_kpa": P,
+        "k_nm_per_deg": k,
+        "moment_nm": np.zeros((len(P), len(SOLVES))),
+        "mid_angle_deg": np.zeros((len(P), len(SOLVES))),
+        "status": np.zeros((len(P), len(SOLVES)), dtype=np.int8),
+        "load_factor": np.ones((len(P), len(SOLVES))),
+        "wall_time_s": np.zeros((len(P), len(SOLVES))),
+    }
+    nc = tmp_path / "unit_stiffness.nc"
+    write_dataset(
+        stiffness_dataset(res, delta_deg=3.0, h_mm=1.0, chain_units=5), nc, rule="t", config_slice={}, title="t"
+    )
+
+    def angle(pt, pb):
+        return 0.1 * (np.asarray(pt, float) - np.asarray(pb, float))
+
+    unit = UnitModel(angle, lambda pt, pb: 2.0 * angle(pt, pb))
+    assert with_measured_stiffness(unit, None) is unit
+    measured = with_measured_stiffness(unit, nc)
+    assert measured.stiffness_nm_per_deg(100.0, 100.0) == pytest.approx(np.exp(1.2), rel=1e-12)
+    assert measured.stiffness_nm_per_deg(100.0, 0.0) == pytest.approx(2.0)  # 10 deg off the diagonal: the secant
+    assert unit.stiffness_nm_per_deg(100.0, 100.0) != pytest.approx(np.exp(1.2))

@@ -7,7 +7,7 @@ the dataset, the deformed meshes (.vtu) and the poses plot.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -15,7 +15,8 @@ import numpy as np
 import xarray as xr
 
 from workflow.actuator.pressure_limit import material_limit
-from workflow.actuator.unit_model import load_unit_model
+from workflow.actuator.stiffness import StiffnessTable
+from workflow.actuator.unit_model import UnitModel, load_unit_model
 from workflow.cascade.calibration import calibrated
 from workflow.cascade.finger import Finger
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
@@ -29,7 +30,14 @@ from workflow.fea_check.plots import plot_fea_poses, plot_standalone
 from workflow.fea_check.run import run_fea_check
 from workflow.fea_check.standalone import merge_exercises
 
-__all__ = ["PatientSetup", "load_patient_setup", "load_surrogate_angles", "write_fea_check", "write_standalone"]
+__all__ = [
+    "PatientSetup",
+    "load_patient_setup",
+    "load_surrogate_angles",
+    "with_measured_stiffness",
+    "write_fea_check",
+    "write_standalone",
+]
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +81,22 @@ def load_patient_setup(
     return PatientSetup(plan, loads, finger, spring_note, upg, ref)
 
 
+def with_measured_stiffness(unit: UnitModel, stiffness_nc: str | Path | None) -> UnitModel:
+    """``unit`` taking the stiffness table of a ``unit_stiffness.nc`` where |theta_free| is below the study's
+    window (its ``delta_deg``), i.e. near P_T = P_B; ``unit`` itself without a file or where the study has no table."""
+    if not stiffness_nc:
+        return unit
+    ds = open_result(stiffness_nc)
+    try:
+        table = StiffnessTable.from_study(ds)
+    except ValueError as exc:
+        log.warning("unit stiffness table not used (%s): the 2D chain keeps the secant stiffness", exc)
+        return unit
+    delta = float(ds.attrs["delta_deg"])
+    log.info("2D chain: the measured stiffness table near P_T = P_B (|theta_free| < %g deg per unit)", delta / 2)
+    return replace(unit, measured_stiffness=table, measured_window_deg=delta)
+
+
 def write_fea_check(
     patient_name: str,
     patient: Mapping[str, Any],
@@ -92,6 +116,7 @@ def write_fea_check(
     surrogate_2d: str | None = None,
     surrogate_3d: str | None = None,
     unit_model_cfg: Mapping | None = None,
+    unit_stiffness_nc: str | None = None,
     rule: str = "fea_check",
     notes: Mapping[str, Any] | None = None,
 ):
@@ -99,7 +124,9 @@ def write_fea_check(
 
     With the surrogates and ``unit_model_cfg`` (config ``surrogates.unit_model``)
     the reduced-order chains are built too: the 2D-unit prediction and the
-    correction step (config ``fea_check.correction``).
+    correction step (config ``fea_check.correction``).  With ``unit_stiffness_nc``
+    (a ``unit_stiffness.nc``; config ``fea_check.unit_stiffness``) the 2D unit's
+    chain takes its measured stiffness table near P_T = P_B.
     """
 
     s = load_patient_setup(
@@ -128,7 +155,8 @@ def write_fea_check(
     ro_plan = ro_2d = None
     if unit_model_cfg is not None and surrogate_2d and surrogate_3d:
         units = {"2d": surrogate_2d, "3d": surrogate_3d}
-        ro_2d = patient_cascade(finger, load_unit_model(surrogate_2d, **unit_model_cfg), cascade_cfg, upg)
+        unit_2d = with_measured_stiffness(load_unit_model(surrogate_2d, **unit_model_cfg), unit_stiffness_nc)
+        ro_2d = patient_cascade(finger, unit_2d, cascade_cfg, upg)
         ro_plan = patient_cascade(
             finger, load_unit_model(units[cascade_cfg.get("surrogate", "3d")], **unit_model_cfg), cascade_cfg, upg
         )
@@ -185,6 +213,9 @@ def write_fea_check(
                 else "plan's, unchanged"
             ),
             "h_actuator_mm": float(fea_cfg.get("h_actuator_mm", 2.0)),
+            "unit_stiffness_2d": "measured table near P_T = P_B"
+            if unit_stiffness_nc and ro_2d is not None
+            else "secant M_blocked / theta_free",
             **dict(notes or {}),
         },
     )

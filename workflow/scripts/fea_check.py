@@ -30,6 +30,7 @@ write_fea_check(
     surrogate_2d=i.get("surrogate_2d"),
     surrogate_3d=i.get("surrogate_3d"),
     unit_model_cfg=p.unit_model,
+    unit_stiffness_nc=i.get("unit_stiffness"),
     rule=snakemake.rule,  # noqa: F821
     notes={"fidelity": f"h = {h:g} mm", "fidelity_reason": why},
 )
