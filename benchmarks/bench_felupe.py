@@ -186,7 +186,13 @@ def main(argv=None):
         default=[2],
         help="also solve ours with formulation mixed (FElupe's technology) in these dims",
     )
-    ap.add_argument("--felupe-steps", type=int, default=20, help="FElupe substeps (cut back where one fails)")
+    ap.add_argument(
+        "--felupe-steps",
+        type=lambda v: [float(x) for x in v.split(",")] if "," in v else int(v),
+        default=20,
+        help="FElupe substeps (cut back where one fails): a number of equal ones, or their end pressures in kPa, "
+        "e.g. 60,180,300",
+    )
     ap.add_argument(
         "--atol",
         type=float,
@@ -207,7 +213,11 @@ def main(argv=None):
     OUT.mkdir(parents=True, exist_ok=True)
     csv = OUT / f"{a.tag}.csv"
     rows = pd.read_csv(csv).to_dict("records") if a.append and csv.is_file() else []
-    setting = {"atol": np.nan if a.atol is None else a.atol, "solver": json.dumps(a.solver, sort_keys=True)}
+    setting = {
+        "atol": np.nan if a.atol is None else a.atol,
+        "solver": json.dumps(a.solver, sort_keys=True),
+        "felupe_steps": str(a.felupe_steps),
+    }
     done = {(r["code"], int(r["dim"]), float(r["h_mm"]), r.get("solver", "{}"), r.get("atol")) for r in rows}
     for dim, hs in ((2, a.h2), (3, a.h3)):
         for h in hs:

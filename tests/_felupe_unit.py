@@ -284,7 +284,8 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
 
     ``um`` a 2D or 3D ``UnitMesh`` (3D: half model, u_z = 0 on z = 0), ``mat``
     from ``fem.material_constants``.  The ramp 0 -> max(pressures_kpa) is cut
-    into ``nsteps`` equal substeps (make the pressures land on them) and
+    into ``nsteps`` equal substeps (make the pressures land on them; or ``nsteps`` the substeps' end
+    pressures in kPa) and
     FElupe's ``CutbackPlugin`` subdivides a substep whose Newton iteration
     fails (the softer Table 5 silicone needs it even without contact).
     ``contact`` (2D only): ``SmoothedGapContact`` on ``wall_pairs(um)`` with
@@ -332,7 +333,10 @@ def felupe_free_angles(um, pressures_kpa, mat, contact=False, eps=None, nsteps=2
             gaps.append(item.min_gap)
 
     # the ramp starts at zero so that the cut-back can subdivide the first substep too
-    steps = np.linspace(0.0, max(pressures_kpa), nsteps + 1) * 1e-3
+    if np.ndim(nsteps):  # the substeps' end pressures themselves (kPa)
+        steps = np.r_[0.0, np.sort(np.asarray(nsteps, float))] * 1e-3
+    else:
+        steps = np.linspace(0.0, max(pressures_kpa), nsteps + 1) * 1e-3
     step = felupe.Step(items=items, ramp={load: steps}, boundaries=bounds)
     # SuperLU raises RuntimeError on a matrix it cannot factorize (contact): cut back then too
     errors = (felupe.NewtonConvergenceError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
