@@ -27,7 +27,8 @@ import resource
 import sys
 from pathlib import Path
 
-from workflow.cascade import patient, planning, plans_data
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's workflow package
+from workflow.cascade import patient, planning, plans_data  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "out"
 ROOT = Path(__file__).resolve().parents[1]

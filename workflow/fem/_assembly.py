@@ -83,8 +83,8 @@ __all__ = ["SolidAssembler", "Pattern", "vector_dofs", "gradient_operator", "enh
 
 SILICONE, PAPER = 0, 1
 #: Default of ``SolidAssembler(lagged_pressure=...)``; a study flips it to compare the two Newton paths
-#: (``benchmarks/bench_newton.py --compare-lag``).
-LAGGED_PRESSURE = True
+#: (``benchmarks/bench_newton.py --compare-lag``), or sets WORKFLOW_FEM_LAGGED_PRESSURE=0 for the processes it spawns.
+LAGGED_PRESSURE = os.environ.get("WORKFLOW_FEM_LAGGED_PRESSURE", "1") != "0"
 
 
 def vector_dofs(nodes: np.ndarray, dim: int) -> np.ndarray:
