@@ -154,20 +154,27 @@ def test_stiffness_table_reproduces_heldout_fea_pairs(chain):
     assert np.abs(heldout_errors(wrong, P[3:, 0], P[3:, 1], k[3:], 1.0, m_max)["rel_error"]).max() > 0.1
 
 
-def test_table_from_a_study_dataset_uses_its_fit_pairs_only():
+def _study_result(extra=()):
+    """A stiffness study's result on the grid 0/100/200 kPa (P_T >= P_B) and ``extra`` pairs, k = exp(0.01 P_T +
+    0.002 P_B) N m/deg, every solve converged (what `rotation_stiffness` returns)."""
     g = np.array([0.0, 100.0, 200.0])
-    P = np.array([(a, b) for a in g for b in g if a >= b] + [[150.0, 50.0]])
-    k = np.exp(0.01 * P[:, 0] + 0.002 * P[:, 1])
-    k[-1] = 99.0  # a held-out pair far off the trend: used, it would move the table there
-    res = {
+    P = np.array([(a, b) for a in g for b in g if a >= b] + list(extra))
+    n = (len(P), len(SOLVES))
+    return {
         "pairs_kpa": P,
-        "k_nm_per_deg": k,
-        "moment_nm": np.zeros((len(P), len(SOLVES))),
-        "mid_angle_deg": np.zeros((len(P), len(SOLVES))),
-        "status": np.zeros((len(P), len(SOLVES)), dtype=np.int8),
-        "load_factor": np.ones((len(P), len(SOLVES))),
-        "wall_time_s": np.zeros((len(P), len(SOLVES))),
+        "k_nm_per_deg": np.exp(0.01 * P[:, 0] + 0.002 * P[:, 1]),
+        "moment_nm": np.zeros(n),
+        "mid_angle_deg": np.zeros(n),
+        "status": np.zeros(n, dtype=np.int8),
+        "load_factor": np.ones(n),
+        "wall_time_s": np.zeros(n),
     }
+
+
+def test_table_from_a_study_dataset_uses_its_fit_pairs_only():
+    res = _study_result(extra=[[150.0, 50.0]])
+    P = res["pairs_kpa"]
+    res["k_nm_per_deg"][-1] = 99.0  # a held-out pair far off the trend: used, it would move the table there
     fit = np.arange(len(P)) < len(P) - 1
     ds = stiffness_dataset(res, delta_deg=3.0, h_mm=1.0, chain_units=5, fit=fit)
     table = StiffnessTable.from_study(ds)
@@ -180,18 +187,7 @@ def test_the_fea_checks_2d_chain_takes_the_table_of_a_study_file(tmp_path):
     from workflow.common.provenance import write_dataset
     from workflow.fea_check.entry import with_measured_stiffness
 
-    g = np.array([0.0, 100.0, 200.0])
-    P = np.array([(a, b) for a in g for b in g if a >= b])
-    k = np.exp(0.01 * P[:, 0] + 0.002 * P[:, 1])
-    res = {
-        "pairs_kpa": P,
-        "k_nm_per_deg": k,
-        "moment_nm": np.zeros((len(P), len(SOLVES))),
-        "mid_angle_deg": np.zeros((len(P), len(SOLVES))),
-        "status": np.zeros((len(P), len(SOLVES)), dtype=np.int8),
-        "load_factor": np.ones((len(P), len(SOLVES))),
-        "wall_time_s": np.zeros((len(P), len(SOLVES))),
-    }
+    res = _study_result()
     nc = tmp_path / "unit_stiffness.nc"
     write_dataset(
         stiffness_dataset(res, delta_deg=3.0, h_mm=1.0, chain_units=5), nc, rule="t", config_slice={}, title="t"

@@ -236,9 +236,9 @@ class SolidAssembler:
                     )
                     n_int += part.size * na
                 self.chunks.append((int(gid), part))
-        self.lagged = bool((LAGGED_PRESSURE if lagged_pressure is None else lagged_pressure) and mixed)
-        self.theta_dofs = {}  # silicone chunk -> (e,) positions of Jb_lin - 1 in the state (lagged pressure)
-        if self.lagged:
+        # silicone chunk -> (e,) positions of Jb_lin - 1 in the state; empty without the lagged pressure
+        self.theta_dofs = {}
+        if (LAGGED_PRESSURE if lagged_pressure is None else lagged_pressure) and mixed:
             for k, (gid, part) in enumerate(self.chunks):
                 if gid == SILICONE:
                     self.theta_dofs[k] = self.ndofs + n_int + np.arange(part.size)
