@@ -5,6 +5,7 @@ import pytest
 
 from workflow import fem
 from workflow.fem._contact import ContactPair, _segment_2d
+from workflow.fem._unit import self_contact_pairs
 
 
 def _kinked_wall(kink_deg=20.0):
@@ -468,3 +469,28 @@ def test_a_collapsed_master_facet_is_out_of_reach_not_a_nan():
     assert inside.any() and np.isfinite(g[inside]).all() and (m[inside] != k).all()
     dofs, force, K, gmin = pair.evaluate(x, 71.6)
     assert np.isfinite(force).all() and np.isfinite(K).all() and np.isfinite(gmin)
+
+
+def test_3d_search_skips_only_slaves_out_of_reach():
+    """The 3D search projects only slaves within reach + search of some facet centroid of their pool; every slave
+    the full search finds within the search distance of a facet it projects into is found alike, and the rest
+    are out of reach (the unit's pocket and gap walls, moved by a smooth field and noise)."""
+    um = fem.build_unit_mesh(None, h=4.0, dim=3)
+    pairs = self_contact_pairs(um)
+    rng = np.random.default_rng(1)
+    p = um.mesh.p
+    x = p + 0.3 * np.sin(p[[1, 2, 0]] / 3.0) + 0.05 * rng.standard_normal(p.shape)
+    skipped = 0
+    for pair in pairs:
+        m, N, n, g, inside = pair._project(x)
+        xs, xm = x[:, pair.slave].T, x[:, pair.master].transpose(1, 2, 0)
+        dc = np.linalg.norm(xs[:, None, :] - xm.mean(axis=1)[pair._pool], axis=2) + pair._pad
+        m0, N0, n0, g0, in0 = pair._project_3d(xs, xm, dc, pair._pool)  # every slave projected
+        ok0 = in0 & (np.abs(g0) <= pair.search)
+        assert ok0.any()
+        np.testing.assert_array_equal(inside & (np.abs(g) <= pair.search), ok0)
+        np.testing.assert_array_equal(m[ok0], m0[ok0])
+        np.testing.assert_array_equal(g[ok0], g0[ok0])
+        np.testing.assert_array_equal(n[ok0], n0[ok0])
+        skipped += int(np.isinf(g).sum())
+    assert skipped > 0  # the filter did skip some

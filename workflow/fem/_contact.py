@@ -242,6 +242,18 @@ def _smooth_projection_3d(
     return ab, n, g
 
 
+def _facet_reach(xm: np.ndarray, lim: np.ndarray) -> np.ndarray:
+    """Largest distance (nm,) from a bilinear facet's centroid to its points over its parameter range ``lim``
+    (nm, 2 directions, lo/hi), mm: at a corner of the range (the distance is convex in each parameter)."""
+    c = xm.mean(axis=1)
+    corners = np.stack(
+        [np.stack([lim[:, 0, i], lim[:, 1, j]], axis=-1) for i in (0, 1) for j in (0, 1)], axis=1
+    )  # (nm, 4, 2)
+    N = _bilinear(corners)[0]  # (nm, 4 corners, 4 nodes)
+    pts = np.einsum("mca,mai->mci", N, xm)
+    return np.linalg.norm(pts - c[:, None, :], axis=-1).max(axis=1) * (1.0 + 1e-6) + 1e-6
+
+
 def _segment_2d(X: np.ndarray, has_prev: np.ndarray, has_next: np.ndarray):
     """Projection of slaves onto master segments along the interpolated normal.
 
@@ -528,10 +540,35 @@ class ContactPair:
         if self.dim == 2:
             return self._project_2d(x, xs)
         # 3D: candidate facets = the 4 nearest centroids, then Newton for (xi, eta)
-        c = xm.mean(axis=1)[self._pool]  # (ns, width, 3)
-        dc = np.linalg.norm(xs[:, None, :] - c, axis=2) + self._pad
+        c = xm.mean(axis=1)
+        dc = np.linalg.norm(xs[:, None, :] - c[self._pool], axis=2) + self._pad  # (ns, width)
+        # A slave within the search distance of a facet's (extended) range lies within reach + search of its
+        # centroid; slaves beyond that for every facet of their pool cannot be in contact and skip the projections
+        # (most slaves, most of the time).  The same result as projecting them: out of reach either way.
+        reach = _facet_reach(xm, self.lim)
+        near_any = (dc - reach[self._pool] <= self.search + 1e-9).any(axis=1)
+        if not near_any.all():
+            return self._project_3d_subset(xs, xm, dc, near_any)
+        return self._project_3d(xs, xm, dc, self._pool)
+
+    def _project_3d_subset(self, xs, xm, dc, live):
+        """``_project_3d`` for the slaves ``live`` only; the others out of reach (g = inf, not inside)."""
+        ns = xs.shape[0]
+        m = self._pool[:, 0].copy()
+        N = np.full((ns, 4), 0.25)
+        n = np.zeros((ns, 3))
+        g = np.full(ns, np.inf)
+        inside = np.zeros(ns, bool)
+        idx = np.flatnonzero(live)
+        if idx.size:
+            m[idx], N[idx], n[idx], g[idx], inside[idx] = self._project_3d(xs[idx], xm, dc[idx], self._pool[idx])
+        return m, N, n, g, inside
+
+    def _project_3d(self, xs: np.ndarray, xm: np.ndarray, dc: np.ndarray, pool: np.ndarray):
+        """3D closest master facet of slaves xs (ns, 3) among the 4 of their ``pool`` with the nearest centroids
+        (distances ``dc``): (facet index, N (ns, 4), n (ns, 3), g (ns,), inside)."""
         k = min(4, dc.shape[1])
-        cand = np.take_along_axis(self._pool, np.argpartition(dc, k - 1, axis=1)[:, :k], axis=1)  # (ns, k)
+        cand = np.take_along_axis(pool, np.argpartition(dc, k - 1, axis=1)[:, :k], axis=1)  # (ns, k)
         X = xm[cand]  # (ns, k, 4, 3)
         # each candidate's closest point, 8 steps (1e-10: round-off on these nearly flat facets)
         ab = _orthogonal_ab(np.repeat(xs, k, axis=0), X.reshape(-1, 4, 3), 8, tol=1e-10, clip=3.0).reshape(
