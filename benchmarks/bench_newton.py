@@ -14,10 +14,15 @@ With ``--compare-lag`` each ray at the default tolerance runs twice in one run, 
 initial-stress pressure taken from the actual element volume and from the lagged (linearised) one (the default,
 ``workflow.fem._assembly.LAGGED_PRESSURE``), the 3D blocked ray added: same values, and the ratio of the two times.
 
-Each case runs in its own process with one BLAS / MKL thread.  Results: ``benchmarks/out/bench_newton.{json,md}``
-(``bench_newton_lag.{json,md}`` with ``--compare-lag``).
+With ``--compare-search`` the 3D rays (h = 2 mm free and blocked, h = 1.4 mm blocked) run twice in one run, with
+and without the two savings that leave the path unchanged: the 3D contact search skipping slaves out of reach of
+every facet (``workflow.fem._contact.REACH_FILTER``) and PARDISO's analysed pattern widened by a halo round new
+entries (``DirectSolver.halo``): same values, the time ratio and the analyses.
 
-    python benchmarks/bench_newton.py [--no-3d] [--compare-lag]
+Each case runs in its own process with one BLAS / MKL thread.  Results: ``benchmarks/out/bench_newton.{json,md}``
+(``bench_newton_lag.{json,md}`` with ``--compare-lag``, ``bench_newton_search.{json,md}`` with ``--compare-search``).
+
+    python benchmarks/bench_newton.py [--no-3d] [--compare-lag | --compare-search]
 """
 
 from __future__ import annotations
@@ -46,14 +51,17 @@ TARGETS = {
 }
 
 
-def _case(dim: int, h: float, case: str, solver: dict, lag: bool | None, queue) -> None:
+def _case(dim: int, h: float, case: str, solver: dict, lag: bool | None, queue, search: bool | None = None) -> None:
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"
     from workflow import fem
-    from workflow.fem import _assembly, _linsolve
+    from workflow.fem import _assembly, _contact, _linsolve
 
     if lag is not None:
         _assembly.LAGGED_PRESSURE = lag
+    if search is not None:
+        _contact.REACH_FILTER = search
+        _linsolve.default_solver.halo = search
 
     t0 = time.perf_counter()
     res = fem.solve_unit({"dim": dim, "h": h}, 300.0, 0.0, case=case, contact=True, solver=solver, stops=STOPS)
@@ -81,14 +89,19 @@ def _case(dim: int, h: float, case: str, solver: dict, lag: bool | None, queue) 
             "value_at_kpa": {str(k): float(v) for k, v in sorted(at.items())},
             "quantity": key,
             "linear_solver": _linsolve.default_solver.backend,
+            "search_savings": bool(_contact.REACH_FILTER and _linsolve.default_solver.halo),
+            "analyses": int(_linsolve.default_solver.stats["analyses"]),
+            "factorisations": int(_linsolve.default_solver.stats["factorisations"]),
         }
     )
 
 
-def run_case(dim: int, h: float, case: str, solver: dict | None = None, lag: bool | None = None) -> dict:
+def run_case(
+    dim: int, h: float, case: str, solver: dict | None = None, lag: bool | None = None, search: bool | None = None
+) -> dict:
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
-    proc = ctx.Process(target=_case, args=(dim, h, case, dict(solver or {}), lag, q))
+    proc = ctx.Process(target=_case, args=(dim, h, case, dict(solver or {}), lag, q, search))
     proc.start()
     out = q.get()
     proc.join()
@@ -140,12 +153,42 @@ def _lag_markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _search_markdown(rows: list[dict]) -> str:
+    lines = [
+        "| case | reach filter and halo | reached | steps | iterations (all attempts) | PARDISO analyses / "
+        "factorisations | wall s | value at 300 kPa | time ratio with / without |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    by = {(r["dim"], r["h_mm"], r["case"], r["search_savings"]): r for r in rows}
+    for r in rows:
+        other = by.get((r["dim"], r["h_mm"], r["case"], False))
+        ratio = f"{r['wall_s'] / other['wall_s']:.2f}" if r["search_savings"] and other else ""
+        v = r["value_at_kpa"].get("300")
+        lines.append(
+            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | {'on' if r['search_savings'] else 'off'} | "
+            f"{100 * r['load_factor']:.0f} % | {r['steps']} | {r['iterations_accepted']} ({r['iterations_all']}) | "
+            f"{r['analyses']} / {r['factorisations']} | {r['wall_s']:.1f} | "
+            f"{'stopped' if v is None else f'{v:.7g}'} | {ratio} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--no-3d", action="store_true", help="leave out the 3D rays")
     ap.add_argument("--compare-lag", action="store_true", help="each ray with the actual and the lagged pressure")
+    ap.add_argument("--compare-search", action="store_true", help="3D rays with and without the search savings")
     args = ap.parse_args(argv)
     rows = []
+    if args.compare_search:
+        for dim, h, case in ((3, 2.0, "blocked"), (3, 2.0, "free"), (3, 1.4, "blocked")):
+            for search in (False, True):
+                rows.append(run_case(dim, h, case, {}, None, search))
+        OUT.mkdir(parents=True, exist_ok=True)
+        (OUT / "bench_newton_search.json").write_text(json.dumps({"rows": rows}, indent=2))
+        (OUT / "bench_newton_search.md").write_text(_search_markdown(rows))
+        print(_search_markdown(rows))
+        return 0
     if args.compare_lag:
         cases = [(2, 1.0, "free"), (2, 1.0, "blocked")] + (
             [] if args.no_3d else [(3, 2.0, "free"), (3, 2.0, "blocked")]

@@ -110,6 +110,30 @@ def test_direct_solver_reuses_analysis_while_the_pattern_fits(backend):
         assert solver.stats["analyses"] == 2 and solver.stats["factorisations"] == 4
 
 
+@pytest.mark.parametrize("halo", [True, False])
+def test_direct_solver_halo_takes_a_slave_sliding_to_the_next_facet_without_a_new_analysis(halo):
+    """A coupling (0, 6) next to a new coupling (0, 5) (6 is coupled to 5 in the body) fits the pattern analysed
+    with the halo; without it PARDISO analyses again.  Same solutions either way."""
+    import scipy.sparse as sp
+
+    from workflow.fem import _linsolve
+
+    solver = _linsolve.DirectSolver(halo=halo)
+    if solver._pardiso is None:
+        pytest.skip("pypardiso not installed")
+    n = 12
+    body = sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(n, n), format="lil")
+    b = np.arange(1.0, n + 1)
+    for j in (None, 5, 6):
+        M = body.copy()
+        if j is not None:
+            M[0, j] = M[j, 0] = -0.5
+        M = M.tocsr()
+        x = solver.solve(M, b)
+        assert np.linalg.norm(M @ x - b) < 1e-12 * np.linalg.norm(b)
+    assert solver.stats["analyses"] == (2 if halo else 3)
+
+
 def test_reduce_matrix_is_the_constraint_product():
     import scipy.sparse as sp
 

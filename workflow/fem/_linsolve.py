@@ -54,10 +54,18 @@ class DirectSolver:
     max_growth : float
         Start the union afresh from the current pattern when it would exceed
         this multiple of the current matrix's entries (bounds the padding).
+    halo : bool
+        When a matrix brings new entries (i, j), analyse also (i, k) and (k, i)
+        for the k coupled to j: a contact slave that couples to a new master
+        facet is likely to slide onto that facet's neighbours next, and then
+        fits without another analysis.
     """
 
-    def __init__(self, reuse_analysis: bool = True, check_rtol: float = 1e-8, max_growth: float = 1.5):
+    def __init__(
+        self, reuse_analysis: bool = True, check_rtol: float = 1e-8, max_growth: float = 1.5, halo: bool = True
+    ):
         self.reuse_analysis = reuse_analysis
+        self.halo = halo
         self.check_rtol = check_rtol
         self.max_growth = max_growth
         self._pardiso = _pypardiso.PyPardisoSolver(mtype=11) if _pypardiso is not None else None
@@ -110,8 +118,11 @@ class DirectSolver:
         akeys = _keys(A)
         keys = akeys
         if union and self._pattern is not None and self._pattern[1].size == n + 1:
-            joined = np.sort(np.concatenate([self._pattern[0], akeys]), kind="stable")  # merges the two sorted runs
-            joined = joined[np.r_[True, joined[1:] != joined[:-1]]]
+            old = self._pattern[0]
+            extra = akeys[~np.isin(akeys, old, assume_unique=True)]
+            if self.halo:
+                extra = np.concatenate([extra, _halo(A, extra)])
+            joined = np.unique(np.concatenate([old, extra]))
             if joined.size <= self.max_growth * akeys.size:
                 keys = joined
         indptr = np.searchsorted(keys // n, np.arange(n + 1)).astype(np.int32)
@@ -146,6 +157,19 @@ class DirectSolver:
     def _accurate(self, A: sp.csr_matrix, x: np.ndarray, b: np.ndarray) -> bool:
         res = np.linalg.norm(A @ x - b)
         return bool(np.isfinite(res) and res <= self.check_rtol * np.linalg.norm(b))
+
+
+def _halo(A: sp.csr_matrix, keys: np.ndarray) -> np.ndarray:
+    """Keys of (i, k) and (k, i) for every entry (i, j) in ``keys`` and every k with an entry (j, k) in A."""
+    if not keys.size:
+        return keys
+    n = A.shape[0]
+    i, j = keys // n, keys % n
+    deg = np.diff(A.indptr)[j]
+    start = np.repeat(A.indptr[j] - np.cumsum(deg) + deg, deg)
+    k = A.indices[start + np.arange(deg.sum())].astype(np.int64)
+    ii = np.repeat(i, deg)
+    return np.concatenate([ii * n + k, k * n + ii])
 
 
 def reduce_matrix(K: sp.spmatrix, T: sp.csr_matrix) -> sp.csr_matrix:
