@@ -548,10 +548,10 @@ class ContactPair:
         # A slave within the search distance of a facet's (extended) range lies within reach + search of its
         # centroid; slaves beyond that for every facet of their pool cannot be in contact and skip the projections
         # (most slaves, most of the time).  The same result as projecting them: out of reach either way.
-        reach = _facet_reach(xm, self.lim)
-        near_any = (dc - reach[self._pool] <= self.search + 1e-9).any(axis=1)
-        if REACH_FILTER and not near_any.all():
-            return self._project_3d_subset(xs, xm, dc, near_any)
+        if REACH_FILTER:
+            near_any = (dc - _facet_reach(xm, self.lim)[self._pool] <= self.search + 1e-9).any(axis=1)
+            if not near_any.all():
+                return self._project_3d_subset(xs, xm, dc, near_any)
         return self._project_3d(xs, xm, dc, self._pool)
 
     def _project_3d_subset(self, xs, xm, dc, live):

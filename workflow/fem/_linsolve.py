@@ -10,8 +10,8 @@ Two costs of a Newton iteration that do not depend on the new values:
   factorisation, scaling and matching; about 40 % of a fresh solve here) runs
   only when a matrix brings entries outside the analysed pattern.  The body's
   pattern is fixed, the contact entries come and go, so the analysed pattern
-  is the union of the patterns seen so far and each matrix is padded with
-  explicit zeros onto it.  Scaling and matching then come from older values:
+  is the union of the patterns seen so far (with a halo round the entries each
+  new analysis adds) and each matrix is padded with explicit zeros onto it.  Scaling and matching then come from older values:
   a solve whose residual ||A x - b|| exceeds ``check_rtol`` ||b|| is repeated
   with a fresh analysis of the matrix itself.
 
