@@ -282,13 +282,15 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     caught 0.111 mm deep at 0.5835, 0.029 mm at 0.584; the same with the exact and the lagged
     volumetric tangent when the steps land there): whether the path's maximum sees it depends
     on where the steps land, so the path's bound is 0.15 mm and the bound itself holds for the
-    hanging state."""
+    hanging state.  Solved as the check solves gravity, with its restarts: the first attempt passes
+    or stalls on the round-off of the linear solves (PARDISO with two threads), which is not what
+    this test is about."""
+    from workflow.fea_check.check import solve_with_restarts
     from workflow.fea_check.model import DEFAULT_FEA_CHECK
-    from workflow.fem.coupled import solve_coupled
 
     springs = [F.JointSpring.linear(k / 90.0) for k in (0.15, 0.06, 0.02)]
     fea = _coarse_patient_fea(springs)
-    res = solve_coupled(fea.setup, {}, solver=dict(SOLVER, atol=1e-6, max_steps=150))
+    res = solve_with_restarts(fea, {}, dict(SOLVER, atol=1e-6, max_steps=150))
     assert res.status == 0 and res.phase == "pressure" and res.load_factor == 1.0
     assert res.history[-1]["penetration_mm"] <= DEFAULT_FEA_CHECK["penetration_bound_mm"]
     assert res.max_penetration_mm <= 0.15

@@ -73,6 +73,10 @@ class DirectSolver:
         self._last = None  # (indptr, indices, positions in the analysed pattern) of the last matrix
         self.stats = {"analyses": 0, "factorisations": 0, "reanalysed_for_accuracy": 0}
 
+    def reset(self) -> None:
+        """Forget the analysed pattern: the next solve analyses its own matrix (as the first one does)."""
+        self._pattern = self._last = None
+
     @property
     def backend(self) -> str:
         return "pardiso" if self._pardiso is not None else "superlu"

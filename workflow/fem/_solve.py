@@ -427,6 +427,9 @@ def solve_path(
     opts = dict(DEFAULT_SOLVER)
     opts.update(options or {})
     predict = model.solid.dim == 2 if opts["predictor"] is None else bool(opts["predictor"])
+    # each path starts from its own analysis: PARDISO's ordering follows the analysed pattern, so a pattern carried
+    # over from an earlier model of the same size would make this path's round-off depend on what ran before
+    _linsolve.default_solver.reset()
     t_start = time.perf_counter()
     if u0 is None:
         u = np.zeros(model.nstate)
