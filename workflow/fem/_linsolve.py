@@ -11,9 +11,10 @@ Two costs of a Newton iteration that do not depend on the new values:
   only when a matrix brings entries outside the analysed pattern.  The body's
   pattern is fixed, the contact entries come and go, so the analysed pattern
   is the union of the patterns seen so far (with a halo round the entries each
-  new analysis adds) and each matrix is padded with explicit zeros onto it.  Scaling and matching then come from older values:
-  a solve whose residual ||A x - b|| exceeds ``check_rtol`` ||b|| is repeated
-  with a fresh analysis of the matrix itself.
+  new analysis adds) and each matrix is padded with explicit zeros onto it.
+  Scaling and matching then come from older values: a solve whose residual
+  ||A x - b|| exceeds ``check_rtol`` ||b|| is repeated with a fresh analysis
+  of the matrix itself.
 
 PARDISO runs through pypardiso's ``PyPardisoSolver`` (0.4.x; its
 ``_call_pardiso`` is the only way there to run single phases).  Without
