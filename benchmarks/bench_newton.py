@@ -173,6 +173,15 @@ def _search_markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _write(stem: str, data: dict, markdown: str) -> int:
+    """``benchmarks/out/<stem>.json`` and ``.md``; the table printed too."""
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / f"{stem}.json").write_text(json.dumps(data, indent=2))
+    (OUT / f"{stem}.md").write_text(markdown)
+    print(markdown)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--no-3d", action="store_true", help="leave out the 3D rays")
@@ -184,11 +193,7 @@ def main(argv=None) -> int:
         for dim, h, case in ((3, 2.0, "blocked"), (3, 2.0, "free"), (3, 1.4, "blocked")):
             for search in (False, True):
                 rows.append(run_case(dim, h, case, {}, None, search))
-        OUT.mkdir(parents=True, exist_ok=True)
-        (OUT / "bench_newton_search.json").write_text(json.dumps({"rows": rows}, indent=2))
-        (OUT / "bench_newton_search.md").write_text(_search_markdown(rows))
-        print(_search_markdown(rows))
-        return 0
+        return _write("bench_newton_search", {"rows": rows}, _search_markdown(rows))
     if args.compare_lag:
         cases = [(2, 1.0, "free"), (2, 1.0, "blocked")] + (
             [] if args.no_3d else [(3, 2.0, "free"), (3, 2.0, "blocked")]
@@ -196,21 +201,13 @@ def main(argv=None) -> int:
         for dim, h, case in cases:
             for lag in (False, True):
                 rows.append(run_case(dim, h, case, {}, lag))
-        OUT.mkdir(parents=True, exist_ok=True)
-        (OUT / "bench_newton_lag.json").write_text(json.dumps({"targets": TARGETS, "rows": rows}, indent=2))
-        (OUT / "bench_newton_lag.md").write_text(_lag_markdown(rows))
-        print(_lag_markdown(rows))
-        return 0
+        return _write("bench_newton_lag", {"targets": TARGETS, "rows": rows}, _lag_markdown(rows))
     for case in ("free", "blocked"):
         for rtol in TOLERANCES:
             rows.append(run_case(2, 1.0, case, {"rtol": rtol}))
     if not args.no_3d:
         rows.append(run_case(3, 2.0, "free", {}))
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "bench_newton.json").write_text(json.dumps({"targets": TARGETS, "rows": rows}, indent=2))
-    (OUT / "bench_newton.md").write_text(_markdown(rows))
-    print(_markdown(rows))
-    return 0
+    return _write("bench_newton", {"targets": TARGETS, "rows": rows}, _markdown(rows))
 
 
 if __name__ == "__main__":

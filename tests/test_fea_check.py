@@ -283,8 +283,8 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     volumetric tangent when the steps land there): whether the path's maximum sees it depends
     on where the steps land, so the path's bound is 0.15 mm and the bound itself holds for the
     hanging state.  Solved as the check solves gravity, with its restarts: the first attempt passes
-    or stalls on the round-off of the linear solves (PARDISO with two threads), which is not what
-    this test is about."""
+    or stalls with the round-off of the linear solves (it stalled once in a full test run and not
+    alone), which is not what this test is about."""
     from workflow.fea_check.check import solve_with_restarts
     from workflow.fea_check.model import DEFAULT_FEA_CHECK
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from workflow import fem
+from workflow.fem import _contact
 from workflow.fem._contact import ContactPair, _segment_2d
 from workflow.fem._unit import self_contact_pairs
 
@@ -471,7 +472,7 @@ def test_a_collapsed_master_facet_is_out_of_reach_not_a_nan():
     assert np.isfinite(force).all() and np.isfinite(K).all() and np.isfinite(gmin)
 
 
-def test_3d_search_skips_only_slaves_out_of_reach():
+def test_3d_search_skips_only_slaves_out_of_reach(monkeypatch):
     """The 3D search projects only slaves within reach + search of some facet centroid of their pool; every slave
     the full search finds within the search distance of a facet it projects into is found alike, and the rest
     are out of reach (the unit's pocket and gap walls, moved by a smooth field and noise)."""
@@ -483,9 +484,9 @@ def test_3d_search_skips_only_slaves_out_of_reach():
     skipped = 0
     for pair in pairs:
         m, N, n, g, inside = pair._project(x)
-        xs, xm = x[:, pair.slave].T, x[:, pair.master].transpose(1, 2, 0)
-        dc = np.linalg.norm(xs[:, None, :] - xm.mean(axis=1)[pair._pool], axis=2) + pair._pad
-        m0, N0, n0, g0, in0 = pair._project_3d(xs, xm, dc, pair._pool)  # every slave projected
+        monkeypatch.setattr(_contact, "REACH_FILTER", False)
+        m0, N0, n0, g0, in0 = pair._project(x)  # every slave projected
+        monkeypatch.setattr(_contact, "REACH_FILTER", True)
         ok0 = in0 & (np.abs(g0) <= pair.search)
         assert ok0.any()
         np.testing.assert_array_equal(inside & (np.abs(g) <= pair.search), ok0)

@@ -245,15 +245,16 @@ def _smooth_projection_3d(
     return ab, n, g
 
 
-def _facet_reach(xm: np.ndarray, lim: np.ndarray) -> np.ndarray:
-    """Largest distance (nm,) from a bilinear facet's centroid to its points over its parameter range ``lim``
-    (nm, 2 directions, lo/hi), mm: at a corner of the range (the distance is convex in each parameter)."""
-    c = xm.mean(axis=1)
-    corners = np.stack(
-        [np.stack([lim[:, 0, i], lim[:, 1, j]], axis=-1) for i in (0, 1) for j in (0, 1)], axis=1
-    )  # (nm, 4, 2)
-    N = _bilinear(corners)[0]  # (nm, 4 corners, 4 nodes)
-    pts = np.einsum("mca,mai->mci", N, xm)
+def _range_corner_shapes(lim: np.ndarray) -> np.ndarray:
+    """Shape functions (nm, 4 corners, 4 nodes) at the corners of each facet's parameter range ``lim`` (nm, 2, 2)."""
+    corners = np.stack([np.stack([lim[:, 0, i], lim[:, 1, j]], axis=-1) for i in (0, 1) for j in (0, 1)], axis=1)
+    return _bilinear(corners)[0]
+
+
+def _facet_reach(xm: np.ndarray, c: np.ndarray, corner_N: np.ndarray) -> np.ndarray:
+    """Largest distance (nm,) from a bilinear facet's centroid ``c`` to its points over its parameter range, mm: at a
+    corner of the range (shape functions ``corner_N``; the distance is convex in each parameter)."""
+    pts = np.einsum("mca,mai->mci", corner_N, xm)
     return np.linalg.norm(pts - c[:, None, :], axis=-1).max(axis=1) * (1.0 + 1e-6) + 1e-6
 
 
@@ -496,6 +497,7 @@ class ContactPair:
                 ],
                 axis=1,
             )  # (nm, 2 directions, lo/hi)
+            self._corner_N = _range_corner_shapes(self.lim)
             if self.smooth_normals:
                 self._setup_nodal_normals_3d(master_part)
 
@@ -549,7 +551,7 @@ class ContactPair:
         # centroid; slaves beyond that for every facet of their pool cannot be in contact and skip the projections
         # (most slaves, most of the time).  The same result as projecting them: out of reach either way.
         if REACH_FILTER:
-            near_any = (dc - _facet_reach(xm, self.lim)[self._pool] <= self.search + 1e-9).any(axis=1)
+            near_any = (dc - _facet_reach(xm, c, self._corner_N)[self._pool] <= self.search + 1e-9).any(axis=1)
             if not near_any.all():
                 return self._project_3d_subset(xs, xm, dc, near_any)
         return self._project_3d(xs, xm, dc, self._pool)
