@@ -18,7 +18,13 @@ and the set of active contact pairs (slave node, master facet).  Reports
   tangent the solver uses against a central difference with 10x and 100x larger
   steps (their spread bounds its error), relative Frobenius norm.
 
+With ``--first-correction``: how far Newton's first correction from rest is from the solution, per element
+technology and load factor (no contact): one linear solve at u = 0, then the residual there over the external
+load.  For an exactly linear problem the ratio is 0; it grows in proportion to the load factor, and the load factor
+at which it reaches 1 is the scale below which a step from rest converges like Newton.
+
     python benchmarks/diag_newton.py [--h 1.0] [--p 300] [--smoothing 0.05]  -> benchmarks/out/diag_newton.json
+    python benchmarks/diag_newton.py --first-correction  -> benchmarks/out/diag_first_correction.json
 """
 
 from __future__ import annotations
@@ -96,13 +102,52 @@ def _tangent_spread(model, u, p_ref) -> dict:
     return out
 
 
+def first_correction(h: float, p_kpa: float, formulations, lams) -> list[dict]:
+    """Residual after one Newton correction from rest over the external load's norm, per formulation and lam."""
+    from workflow.fem import _linsolve, build_unit_mesh
+    from workflow.fem._unit import unit_model
+
+    um = build_unit_mesh(None, h=h, dim=2)
+    rows = []
+    for form in formulations:
+        m = unit_model(um, p_kpa, 0.0, case="free", contact=False, formulation=form)
+        for lam in lams:
+            u = np.concatenate([lam * m.uD, np.zeros(m.nstate - m.n)])
+            r, K, info = m.evaluate(u, lam, um.mesh.p)
+            dv = _solve.linear_solve(_linsolve.reduce_matrix(K, m.T), -(m.T.T @ info.get("r_condensed", r)))
+            du = m.T @ dv
+            if m.nstate > m.n:
+                du = np.concatenate([du, m.solid.recover(du)])
+            r1, _, info1 = m.evaluate(m.increment(u, du, um.mesh.p), lam, um.mesh.p, tangent=False)
+            rr = m.T.T @ r1
+            norm = float(np.sqrt(rr @ rr + info1["r_internal"] @ info1["r_internal"]))
+            rows.append(
+                {
+                    "formulation": form,
+                    "p_top_kpa": lam * p_kpa,
+                    "max_correction_mm": float(np.abs(du[: m.n]).max()),
+                    "residual_over_load": norm / info["f_ext_norm"],
+                }
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--h", type=float, default=1.0, help="element size, mm")
     ap.add_argument("--p", type=float, default=300.0, help="P_T at the end of the ray, kPa")
     ap.add_argument("--smoothing", type=float, default=None, help="contact smoothing band, mm (default: the model's)")
     ap.add_argument("--out", default="diag_newton.json", help="file name under benchmarks/out/")
+    ap.add_argument("--first-correction", action="store_true", help="only the first correction from rest")
     args = ap.parse_args(argv)
+    if args.first_correction:
+        rows = first_correction(
+            args.h, args.p, ("displacement", "mixed", "enhanced_paper", "enhanced"), (1e-5, 1e-4, 1e-3, 0.0125, 0.025)
+        )
+        OUT.mkdir(parents=True, exist_ok=True)
+        (OUT / "diag_first_correction.json").write_text(json.dumps(rows, indent=2))
+        return 0
 
     records: list[dict] = []
     orig = _solve.Model.evaluate
