@@ -20,7 +20,7 @@ and the set of active contact pairs (slave node, master facet).  Reports
 
 With ``--first-correction``: how far Newton's first correction from rest is from the solution, per element
 technology and load factor (no contact): one linear solve at u = 0, then the residual there over the external
-load.  For an exactly linear problem the ratio is 0; it grows in proportion to the load factor, and the load factor
+load; then at one small load with the bulk modulus and the paper's stiffness varied.  For an exactly linear problem the ratio is 0; it grows in proportion to the load factor, and the load factor
 at which it reaches 1 is the scale below which a step from rest converges like Newton.
 
     python benchmarks/diag_newton.py [--h 1.0] [--p 300] [--smoothing 0.05]  -> benchmarks/out/diag_newton.json
@@ -102,15 +102,16 @@ def _tangent_spread(model, u, p_ref) -> dict:
     return out
 
 
-def first_correction(h: float, p_kpa: float, formulations, lams) -> list[dict]:
-    """Residual after one Newton correction from rest over the external load's norm, per formulation and lam."""
+def first_correction(h: float, p_kpa: float, formulations, lams, material: dict | None = None) -> list[dict]:
+    """Residual after one Newton correction from rest over the external load's norm, per formulation and lam
+    (``material``: overrides of the unit's material, e.g. ``bulk_ratio`` or ``paper_e_mpa``)."""
     from workflow.fem import _linsolve, build_unit_mesh
     from workflow.fem._unit import unit_model
 
     um = build_unit_mesh(None, h=h, dim=2)
     rows = []
     for form in formulations:
-        m = unit_model(um, p_kpa, 0.0, case="free", contact=False, formulation=form)
+        m = unit_model(um, p_kpa, 0.0, case="free", contact=False, formulation=form, material=material)
         for lam in lams:
             u = np.concatenate([lam * m.uD, np.zeros(m.nstate - m.n)])
             r, K, info = m.evaluate(u, lam, um.mesh.p)
@@ -124,6 +125,7 @@ def first_correction(h: float, p_kpa: float, formulations, lams) -> list[dict]:
             rows.append(
                 {
                     "formulation": form,
+                    **dict(material or {}),
                     "p_top_kpa": lam * p_kpa,
                     "max_correction_mm": float(np.abs(du[: m.n]).max()),
                     "residual_over_load": norm / info["f_ext_norm"],
@@ -145,6 +147,12 @@ def main(argv=None) -> int:
         rows = first_correction(
             args.h, args.p, ("displacement", "mixed", "enhanced_paper", "enhanced"), (1e-5, 1e-4, 1e-3, 0.0125, 0.025)
         )
+        # what the spike scales with: the bulk modulus (K / mu0) and the paper's stiffness, at one small load
+        for bulk in (10.0, 100.0, 1000.0, 10000.0):
+            for paper in (1200.0, 12.0):
+                rows += first_correction(
+                    args.h, args.p, ("enhanced_paper",), (1e-4,), {"bulk_ratio": bulk, "paper_e_mpa": paper}
+                )
         OUT.mkdir(parents=True, exist_ok=True)
         (OUT / "diag_first_correction.json").write_text(json.dumps(rows, indent=2))
         return 0
