@@ -165,6 +165,11 @@ def write_fea_check(
             ro_2d, ro_plan = calibrated(ro_2d, gain, comp), calibrated(ro_plan, gain, comp)
     # the 2D pressures: the paper's free-angle map, or the angles matched under the moment each unit carries
     m_units = None
+    if unit_stiffness_nc and fea_cfg.get("pressure_map", "free_angle") != "loaded":
+        log.warning(
+            "fea_check.unit_stiffness with the free-angle map: the measured stiffness changes only the 2D chain's "
+            "recorded prediction, not the applied pressures (those follow it with fea_check.pressure_map = loaded)"
+        )
     if a3 is not None and fea_cfg.get("pressure_map", "free_angle") == "loaded":
         if ro_plan is None:
             raise ValueError("fea_check.pressure_map = loaded needs the unit model (surrogates.unit_model)")
