@@ -165,11 +165,6 @@ def write_fea_check(
             ro_2d, ro_plan = calibrated(ro_2d, gain, comp), calibrated(ro_plan, gain, comp)
     # the 2D pressures: the paper's free-angle map, or the angles matched under the moment each unit carries
     m_units = None
-    if unit_stiffness_nc and fea_cfg.get("pressure_map", "free_angle") != "loaded":
-        log.warning(
-            "fea_check.unit_stiffness with the free-angle map: the measured stiffness changes only the 2D chain's "
-            "recorded prediction, not the applied pressures (those follow it with fea_check.pressure_map = loaded)"
-        )
     if a3 is not None and fea_cfg.get("pressure_map", "free_angle") == "loaded":
         if ro_plan is None:
             raise ValueError("fea_check.pressure_map = loaded needs the unit model (surrogates.unit_model)")
@@ -178,6 +173,13 @@ def write_fea_check(
         ex = list(fea_cfg.get("exercises") or plan["exercise"].values)
         m_units = plan["unit_moment_nm"].sel(exercise=ex, group=list(GROUPS)).values
         log.info("2D pressures matched under the plan's unit moments (fea_check.pressure_map = loaded)")
+    if unit_stiffness_nc and ro_2d is not None and m_units is None:
+        # the correction's Jacobian is the plan chain's; the 2D chain reaches the pressures only through the loaded map
+        log.warning(
+            "fea_check.unit_stiffness: the measured stiffness changes only the 2D chain's recorded prediction here, not "
+            "the applied pressures (they take it only through the loaded 2D-to-3D map: fea_check.pressure_map = loaded, "
+            "with the map in use)"
+        )
     material = material_limit(actuator_cfg.get("material"))
     limit_plan = plan_limit(cascade_cfg, None if ro_plan is None else ro_plan.unit, material)
     limit_2d = applied_limit(actuator_cfg, pm2)
