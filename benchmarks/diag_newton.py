@@ -19,11 +19,14 @@ and the set of active contact pairs (slave node, master facet).  Reports
   steps (their spread bounds its error), relative Frobenius norm.
 
 With ``--first-correction``: how far Newton's first correction from rest is from the solution, per element
-technology and load factor (no contact): one linear solve at u = 0, then the residual there over the external
-load; then at one small load with the bulk modulus and the paper's stiffness varied.  For an exactly linear problem the ratio is 0; it grows in proportion to the load factor, and the load factor
-at which it reaches 1 is the scale below which a step from rest converges like Newton.
+technology and load factor (no contact): one linear solve at u = 0 (no line search), then the residual there over
+the external load's norm (the solver's tolerance adds the reactions to it); then at one small load with the bulk
+modulus and the paper's stiffness varied.  For an exactly linear problem the ratio is 0; the load at which it
+reaches 1 is the scale below which a step from rest is in Newton's quadratic range.  ``--no-contact`` and
+``--paper-e`` run the recorded ray without contact or with another paper stiffness.
 
-    python benchmarks/diag_newton.py [--h 1.0] [--p 300] [--smoothing 0.05]  -> benchmarks/out/diag_newton.json
+    python benchmarks/diag_newton.py [--h 1.0] [--p 300] [--smoothing 0.05] [--no-contact] [--paper-e 120]
+        -> benchmarks/out/diag_newton.json
     python benchmarks/diag_newton.py --first-correction  -> benchmarks/out/diag_first_correction.json
 """
 
@@ -103,8 +106,10 @@ def _tangent_spread(model, u, p_ref) -> dict:
 
 
 def first_correction(h: float, p_kpa: float, formulations, lams, material: dict | None = None) -> list[dict]:
-    """Residual after one Newton correction from rest over the external load's norm, per formulation and lam
-    (``material``: overrides of the unit's material, e.g. ``bulk_ratio`` or ``paper_e_mpa``)."""
+    """Residual after one Newton correction from rest over the external load's norm, per formulation and lam.
+
+    ``h`` element size (mm), ``p_kpa`` P_T at lam = 1 (kPa), ``material`` overrides of the unit's material (e.g.
+    ``bulk_ratio``, ``paper_e_mpa``).  A correction that inverts an element is recorded with a NaN ratio."""
     from workflow.fem import _linsolve, build_unit_mesh
     from workflow.fem._unit import unit_model
 
@@ -120,8 +125,11 @@ def first_correction(h: float, p_kpa: float, formulations, lams, material: dict 
             if m.nstate > m.n:
                 du = np.concatenate([du, m.solid.recover(du)])
             r1, _, info1 = m.evaluate(m.increment(u, du, um.mesh.p), lam, um.mesh.p, tangent=False)
-            rr = m.T.T @ r1
-            norm = float(np.sqrt(rr @ rr + info1["r_internal"] @ info1["r_internal"]))
+            if r1 is None:  # an inverted element
+                norm = float("nan")
+            else:
+                rr = m.T.T @ r1
+                norm = float(np.sqrt(rr @ rr + info1["r_internal"] @ info1["r_internal"]))
             rows.append(
                 {
                     "formulation": form,
@@ -142,6 +150,8 @@ def main(argv=None) -> int:
     ap.add_argument("--smoothing", type=float, default=None, help="contact smoothing band, mm (default: the model's)")
     ap.add_argument("--out", default="diag_newton.json", help="file name under benchmarks/out/")
     ap.add_argument("--first-correction", action="store_true", help="only the first correction from rest")
+    ap.add_argument("--no-contact", action="store_true", help="the ray without contact")
+    ap.add_argument("--paper-e", type=float, default=None, help="paper layer's Young's modulus, MPa (default 1200)")
     args = ap.parse_args(argv)
     if args.first_correction:
         rows = first_correction(
@@ -182,7 +192,16 @@ def main(argv=None) -> int:
     try:
         t0 = time.perf_counter()
         copts = {} if args.smoothing is None else {"smoothing_mm": args.smoothing}
-        res = fem.solve_unit({"dim": 2, "h": args.h}, args.p, 0.0, case="free", contact=True, contact_options=copts)
+        mat = None if args.paper_e is None else {"paper_e_mpa": args.paper_e}
+        res = fem.solve_unit(
+            {"dim": 2, "h": args.h},
+            args.p,
+            0.0,
+            case="free",
+            contact=not args.no_contact,
+            contact_options=copts,
+            material=mat,
+        )
         wall = time.perf_counter() - t0
     finally:
         _solve.Model.evaluate = orig
@@ -227,6 +246,8 @@ def main(argv=None) -> int:
         "h_mm": args.h,
         "smoothing_mm": args.smoothing if args.smoothing is not None else fem.DEFAULT_CONTACT["smoothing_mm"],
         "p_top_kpa": args.p,
+        "contact": not args.no_contact,
+        "paper_e_mpa": args.paper_e,
         "status": int(res.status),
         "load_factor": float(res.load_factor),
         "angle_deg": float(res.bending_angle_deg),
