@@ -110,26 +110,21 @@ def first_correction(h: float, p_kpa: float, formulations, lams, material: dict 
 
     ``h`` element size (mm), ``p_kpa`` P_T at lam = 1 (kPa), ``material`` overrides of the unit's material (e.g.
     ``bulk_ratio``, ``paper_e_mpa``).  A correction that inverts an element is recorded with a NaN ratio."""
-    from workflow.fem import _linsolve, build_unit_mesh
+    from workflow.fem import build_unit_mesh
     from workflow.fem._unit import unit_model
 
     um = build_unit_mesh(None, h=h, dim=2)
+    # the solver's own Newton iteration, stopped after its first correction (no line search)
+    once = {**_solve.DEFAULT_SOLVER, "max_iter": 1, "line_search": False}
     rows = []
     for form in formulations:
         m = unit_model(um, p_kpa, 0.0, case="free", contact=False, formulation=form, material=material)
         for lam in lams:
-            u = np.concatenate([lam * m.uD, np.zeros(m.nstate - m.n)])
-            r, K, info = m.evaluate(u, lam, um.mesh.p)
-            dv = _solve.linear_solve(_linsolve.reduce_matrix(K, m.T), -(m.T.T @ info.get("r_condensed", r)))
-            du = m.T @ dv
-            if m.nstate > m.n:
-                du = np.concatenate([du, m.solid.recover(du)])
-            r1, _, info1 = m.evaluate(m.increment(u, du, um.mesh.p), lam, um.mesh.p, tangent=False)
-            if r1 is None:  # an inverted element
-                norm = float("nan")
-            else:
-                rr = m.T.T @ r1
-                norm = float(np.sqrt(rr @ rr + info1["r_internal"] @ info1["r_internal"]))
+            _, u1, _, _, info = _solve._newton(m, np.zeros(m.nstate), lam, um.mesh.p, once)
+            r1, _, info1 = m.evaluate(u1, lam, um.mesh.p, tangent=False)
+            # an inverted element: NaN
+            norm = float("nan") if r1 is None else _solve._residual_norm(m, r1, info1, once)[0]
+            du = u1[: m.n] - lam * m.uD
             rows.append(
                 {
                     "formulation": form,
