@@ -37,6 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 from workflow.actuator.unit_model import load_unit_model  # noqa: E402
 from workflow.cascade import model as cm  # noqa: E402
+from workflow.cascade.calibration import calibrated  # noqa: E402
 from workflow.cascade.patient import patient_cascade, patient_finger  # noqa: E402
 from workflow.common.provenance import open_result  # noqa: E402
 
@@ -95,14 +96,13 @@ class Study:
         self.P, self.A = ds.pressure_2d_kpa.values, ds.angle_fea_deg.values
         self.fit = ds.role.values == "fit"
         self.sets = ds.set_name.values
-        self.counts = self.chain.span_counts()
+        self.bare = calibrated(self.chain, np.ones(3), np.zeros(3))  # gain 1, no give beyond the straps'
         self.c_strap = cm._strap_compliance(self.chain)
 
     def span_bends(self, p8: np.ndarray, m: np.ndarray) -> np.ndarray:
-        pt = cm.pressures_table(p8)
-        pg, mm = np.repeat(pt, 3, axis=0), np.tile(np.asarray(m, float), 4)
-        th = np.asarray(self.chain.unit.angle_deg(pg[:, 0], pg[:, 1], mm), float).reshape(4, 3)
-        return np.sum(self.counts * th.T, axis=1)
+        """S (3,) deg: each span's units' bends under the span moments ``m`` (N m), summed: the chain's own span bend
+        with gain 1, the straps' give added back (the couplings here apply their gains and gives to S)."""
+        return cm._span_angles_deg(self.bare, p8, m)[1] + np.rad2deg(self.c_strap * m)
 
     def angles(self, x: np.ndarray, kind: str, rows: np.ndarray) -> np.ndarray:
         G, c, b = _unpack(x, kind)
