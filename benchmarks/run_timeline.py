@@ -1,0 +1,180 @@
+"""How busy a Snakemake run kept the cores: a timeline of its jobs from the run's log.
+
+Usage::
+
+    snakemake -c2 > run.log 2>&1
+    python benchmarks/run_timeline.py run.log [--cores 2] [--png benchmarks/out/run_timeline.png]
+
+Reads the start (``[date]`` then ``rule``/``localrule`` with its ``jobid``) and the end
+(``Finished jobid: N``) of every job in the log Snakemake writes to its terminal, and
+the threads each job was given (1 unless the log names ``threads``).  Prints the run's
+wall time, the job-seconds, the mean number of busy cores over the wall time, the
+share of the wall time in which fewer than ``--cores`` were busy and which job ran
+alone then, and the longest jobs; draws a Gantt chart when ``--png`` is given.
+Jobs still running at the log's end are counted up to its last timestamp and flagged.
+Not a test: a measurement of one run on one machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+
+STAMP = re.compile(r"^\[(\w{3} \w{3} +\d+ \d\d:\d\d:\d\d \d{4})\]$")
+RULE = re.compile(r"^(?:local)?rule (\w+):$")
+JOBID = re.compile(r"^\s+jobid: (\d+)$")
+THREADS = re.compile(r"^\s+threads: (\d+)$")
+WILDCARDS = re.compile(r"^\s+wildcards: (.*)$")
+LINE_STAMP = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),\d+ ")  # a job's log line: moves the clock only
+FINISHED = re.compile(r"^Finished jobid: (\d+)")
+ERROR = re.compile(r"^Error in rule (\w+):")
+
+
+@dataclass
+class Job:
+    """One job of the run: rule, wildcards, threads, start and end (s from the run's first timestamp)."""
+
+    jobid: int
+    rule: str
+    wildcards: str = ""
+    threads: int = 1
+    start: float = 0.0
+    end: float | None = None
+    failed: bool = False
+
+    @property
+    def name(self) -> str:
+        return f"{self.rule}[{self.wildcards}]" if self.wildcards else self.rule
+
+
+def parse_log(text: str) -> tuple[list[Job], float]:
+    """Jobs of a Snakemake log and the time (s) of its last timestamp, both from its first timestamp."""
+    jobs: dict[int, Job] = {}
+    t0 = last = None
+    stamp = None
+    pending: Job | None = None
+    for line in text.splitlines():
+        m = STAMP.match(line)
+        if m:
+            stamp = datetime.strptime(" ".join(m.group(1).split()), "%a %b %d %H:%M:%S %Y").timestamp()
+            t0 = stamp if t0 is None else t0
+            last = stamp
+            pending = None
+            continue
+        if stamp is None:
+            continue
+        if m := LINE_STAMP.match(line):
+            last = max(last, datetime.strptime(m.group(1), "%Y-%m-%d %H:%M:%S").timestamp())
+            continue
+        if m := RULE.match(line):
+            pending = Job(jobid=-1, rule=m.group(1), start=stamp - t0)
+        elif pending is not None and (m := JOBID.match(line)):
+            pending.jobid = int(m.group(1))
+            jobs[pending.jobid] = pending
+        elif pending is not None and (m := THREADS.match(line)):
+            pending.threads = int(m.group(1))
+        elif pending is not None and (m := WILDCARDS.match(line)):
+            pending.wildcards = m.group(1)
+        elif m := FINISHED.match(line):
+            job = jobs.get(int(m.group(1)))
+            if job is not None:
+                job.end = stamp - t0
+        elif m := ERROR.match(line):
+            for job in jobs.values():
+                if job.rule == m.group(1) and job.end is None:
+                    job.end, job.failed = stamp - t0, True
+    if t0 is None:
+        raise SystemExit("no timestamps in the log: is it the terminal output of a Snakemake run?")
+    return list(jobs.values()), last - t0
+
+
+def busy_profile(jobs: list[Job], wall: float, cores: int) -> tuple[float, float, list[tuple[float, float, list[str]]]]:
+    """Mean busy cores over the wall time, seconds with fewer than ``cores`` busy, and those spans with their jobs."""
+    edges = sorted({0.0, wall, *(j.start for j in jobs), *((j.end if j.end is not None else wall) for j in jobs)})
+    busy_area, under, spans = 0.0, 0.0, []
+    for a, b in zip(edges[:-1], edges[1:]):
+        running = [j for j in jobs if j.start <= a and (j.end if j.end is not None else wall) >= b]
+        busy = min(cores, sum(j.threads for j in running))
+        busy_area += busy * (b - a)
+        if busy < cores and b > a:
+            under += b - a
+            spans.append((a, b, [j.name for j in running]))
+    return busy_area / wall if wall else 0.0, under, spans
+
+
+def draw(jobs: list[Job], wall: float, png: Path) -> None:
+    """Gantt chart of the jobs, one row per job in start order (minutes on the x axis)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    order = sorted(jobs, key=lambda j: j.start)
+    rules = sorted({j.rule for j in jobs})
+    colours = {r: plt.cm.tab20(i % 20) for i, r in enumerate(rules)}
+    fig, ax = plt.subplots(figsize=(11, max(4, 0.12 * len(order))))
+    for row, j in enumerate(order):
+        end = j.end if j.end is not None else wall
+        ax.barh(
+            row, (end - j.start) / 60, left=j.start / 60, color=colours[j.rule], edgecolor="k" if j.failed else None
+        )
+    ax.set_yticks([])
+    ax.invert_yaxis()
+    ax.set_xlabel("wall time since the run's start (min)")
+    ax.set_title(f"{len(jobs)} jobs, {wall / 60:.1f} min")
+    long = sorted({j.rule for j in jobs if ((j.end or wall) - j.start) > 0.02 * wall})
+    ax.legend(
+        handles=[plt.Rectangle((0, 0), 1, 1, color=colours[r]) for r in long],
+        labels=long,
+        fontsize=7,
+        loc="lower right",
+    )
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("log", type=Path)
+    ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--png", type=Path)
+    ap.add_argument("--top", type=int, default=12, help="longest jobs to list")
+    args = ap.parse_args(argv)
+    jobs, wall = parse_log(args.log.read_text())
+    job_s = sum(((j.end if j.end is not None else wall) - j.start) * j.threads for j in jobs)
+    mean_busy, under, spans = busy_profile(jobs, wall, args.cores)
+    running = [j for j in jobs if j.end is None]
+    print(
+        f"jobs started {len(jobs)}, finished {sum(j.end is not None and not j.failed for j in jobs)}, "
+        f"failed {sum(j.failed for j in jobs)}, still running at the log's end {len(running)}"
+    )
+    print(f"wall {wall:.0f} s ({wall / 60:.1f} min); job-seconds {job_s:.0f} ({job_s / 60:.1f} job-min)")
+    print(
+        f"mean busy cores {mean_busy:.2f} of {args.cores}; fewer than {args.cores} busy for {under:.0f} s "
+        f"({100 * under / wall:.0f} % of the wall time)"
+    )
+    alone: dict[str, float] = {}
+    for a, b, names in spans:
+        key = " + ".join(names) if names else "(none)"
+        alone[key] = alone.get(key, 0.0) + b - a
+    print("running while a core idled (s):")
+    for key, s in sorted(alone.items(), key=lambda kv: -kv[1])[:8]:
+        print(f"  {s:7.0f}  {key}")
+    print("longest jobs (s):")
+    for j in sorted(jobs, key=lambda j: -((j.end if j.end is not None else wall) - j.start))[: args.top]:
+        end = j.end if j.end is not None else wall
+        flag = " (still running)" if j.end is None else (" (failed)" if j.failed else "")
+        print(f"  {end - j.start:7.0f}  {j.start / 60:6.1f}-{end / 60:6.1f} min  {j.name}{flag}")
+    if args.png:
+        draw(jobs, wall, args.png)
+        print(f"chart: {args.png}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
