@@ -84,6 +84,9 @@ rule sweep_shard:
     wildcard_constraints:
         fea="2d|3d",
         shard=r"\d+",
+    # the cold run's critical path (sweeps -> surrogates -> plans -> the check's mesh study -> the checks)
+    # goes before the studies beside it, which then fill the cores the path leaves idle
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -106,6 +109,7 @@ rule sweep_merge:
         "results/benchmarks/rules/sweep_merge_{fea}.tsv"
     wildcard_constraints:
         fea="2d|3d",
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -127,6 +131,7 @@ rule surrogate_cv:
         "logs/surrogates/surrogate_cv.log",
     benchmark:
         "results/benchmarks/rules/surrogate_cv.tsv"
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -157,6 +162,7 @@ rule surrogate_fit:
         "results/benchmarks/rules/surrogate_fit_{fea}.tsv"
     wildcard_constraints:
         fea="2d|3d",
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -183,6 +189,7 @@ rule mapping_2d3d:
         "logs/surrogates/mapping_2d3d.log",
     benchmark:
         "results/benchmarks/rules/mapping_2d3d.tsv"
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:

@@ -26,6 +26,7 @@ rule cascade_plan:
         "logs/cascade/cascade_plan/{patient}.log",
     benchmark:
         "results/benchmarks/rules/cascade_plan_{patient}.tsv"
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:

@@ -119,6 +119,7 @@ rule fidelity_check:
         "logs/fidelity/fidelity_check/{patient}.log",
     benchmark:
         "results/benchmarks/rules/fidelity_check_{patient}.tsv"
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:
