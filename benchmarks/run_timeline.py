@@ -12,6 +12,15 @@ wall time, the job-seconds, the mean number of busy cores over the wall time, th
 share of the wall time in which fewer than ``--cores`` were busy and which job ran
 alone then, and the longest jobs; draws a Gantt chart when ``--png`` is given.
 Jobs still running at the log's end are counted up to its last timestamp and flagged.
+
+With ``--simulate DAG.dot`` (``snakemake --forceall --dag > DAG.dot`` of the rules to
+judge) the measured jobs are scheduled again on ``--cores`` cores by the DAG's
+dependencies and the rules' ``priority`` (read from ``--rules``): whenever a core is
+free the ready job of highest priority starts, ties in the order the measured run
+started them.  Run it on the DAG of the rules that ran to check that it reproduces the
+measured wall time, then on another DAG for an estimate of what a change of the
+rules' order or dependencies does, without a second cold run.  An estimate: jobs the
+log does not hold take the mean of their rule's measured jobs, else 0 s.
 Not a test: a measurement of one run on one machine.
 """
 
@@ -106,6 +115,85 @@ def busy_profile(jobs: list[Job], wall: float, cores: int) -> tuple[float, float
     return busy_area / wall if wall else 0.0, under, spans
 
 
+NODE = re.compile(r'^\s*(\d+)\[label = "([^"]*)"')
+EDGE = re.compile(r"^\s*(\d+) -> (\d+)")
+PRIORITY_RULE = re.compile(r"^(?:local)?rule (\w+):")
+PRIORITY = re.compile(r"^\s+priority: (\d+)")
+
+
+def _key(rule: str, wildcards: dict[str, str]) -> str:
+    return rule + "[" + ", ".join(f"{k}={wildcards[k]}" for k in sorted(wildcards)) + "]"
+
+
+def _log_key(job: Job) -> str:
+    pairs = [w.split("=", 1) for w in job.wildcards.split(", ")] if job.wildcards else []
+    return _key(job.rule, {k.strip(): v.strip() for k, v in pairs})
+
+
+def read_dag(dot: str) -> tuple[dict[int, str], dict[int, set[int]]]:
+    """Jobs (id -> rule[wildcards]) and their dependencies (id -> ids it waits for) of ``snakemake --dag``."""
+    nodes, deps = {}, {}
+    for line in dot.splitlines():
+        if m := NODE.match(line):
+            rule, *wc = m.group(2).split("\\n")
+            nodes[int(m.group(1))] = _key(rule, dict(w.split(": ", 1) for w in wc))
+            deps.setdefault(int(m.group(1)), set())
+        elif m := EDGE.match(line):
+            deps.setdefault(int(m.group(2)), set()).add(int(m.group(1)))
+    return nodes, deps
+
+
+def read_priorities(paths: list[Path]) -> dict[str, int]:
+    """``priority`` per rule of the given Snakemake files (rules without one: 0)."""
+    out, rule = {}, None
+    for path in paths:
+        for line in path.read_text().splitlines():
+            if m := PRIORITY_RULE.match(line):
+                rule = m.group(1)
+            elif rule and (m := PRIORITY.match(line)):
+                out[rule] = int(m.group(1))
+    return out
+
+
+def simulate(
+    jobs: list[Job], nodes: dict[int, str], deps: dict[int, set[int]], priority: dict[str, int], cores: int
+) -> tuple[float, float, int]:
+    """(wall time, seconds with a core idle, jobs without a measured time) of the DAG on ``cores`` cores, s."""
+    measured = {_log_key(j): j for j in jobs if j.end is not None and not j.failed}
+    by_rule: dict[str, list[float]] = {}
+    for j in measured.values():
+        by_rule.setdefault(j.rule, []).append(j.end - j.start)
+    dur, order, unmeasured = {}, {}, 0
+    for n, key in nodes.items():
+        rule = key.split("[", 1)[0]
+        if key in measured:
+            dur[n], order[n] = measured[key].end - measured[key].start, measured[key].start
+        else:
+            dur[n] = sum(by_rule[rule]) / len(by_rule[rule]) if rule in by_rule else 0.0
+            order[n], unmeasured = -1.0, unmeasured + 1
+    done: set[int] = set()
+    running: list[tuple[float, int]] = []
+    t = idle = 0.0
+    pending = set(nodes)
+    while pending or running:
+        ready = sorted(
+            (n for n in pending if deps.get(n, set()) <= done),
+            key=lambda n: (-priority.get(nodes[n].split("[", 1)[0], 0), order[n]),
+        )
+        while ready and len(running) < cores:
+            n = ready.pop(0)
+            pending.discard(n)
+            running.append((t + dur[n], n))
+        if not running:
+            raise SystemExit("the DAG has a cycle or a job waits for one it does not hold")
+        running.sort()
+        t_next, n = running.pop(0)
+        idle += (cores - len(running) - 1) * (t_next - t)
+        t = t_next
+        done.add(n)
+    return t, idle, unmeasured
+
+
 def draw(jobs: list[Job], wall: float, png: Path) -> None:
     """Gantt chart of the jobs, one row per job in start order (minutes on the x axis)."""
     import matplotlib
@@ -144,6 +232,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cores", type=int, default=2)
     ap.add_argument("--png", type=Path)
     ap.add_argument("--top", type=int, default=12, help="longest jobs to list")
+    ap.add_argument("--simulate", type=Path, nargs="+", help="DAG files (snakemake --forceall --dag) to schedule")
+    ap.add_argument(
+        "--rules",
+        type=Path,
+        nargs="+",
+        help="Snakemake files whose priorities the schedule takes, one set per DAG (default: ./Snakefile rules/*.smk)",
+    )
     args = ap.parse_args(argv)
     jobs, wall = parse_log(args.log.read_text())
     job_s = sum(((j.end if j.end is not None else wall) - j.start) * j.threads for j in jobs)
@@ -170,6 +265,14 @@ def main(argv: list[str] | None = None) -> int:
         end = j.end if j.end is not None else wall
         flag = " (still running)" if j.end is None else (" (failed)" if j.failed else "")
         print(f"  {end - j.start:7.0f}  {j.start / 60:6.1f}-{end / 60:6.1f} min  {j.name}{flag}")
+    for dag in args.simulate or []:
+        files = args.rules or [Path("Snakefile"), *sorted(Path("rules").glob("*.smk"))]
+        nodes, deps = read_dag(dag.read_text())
+        t, idle, unmeasured = simulate(jobs, nodes, deps, read_priorities(files), args.cores)
+        print(
+            f"{dag}: {len(nodes)} jobs ({unmeasured} without a measured time) scheduled on {args.cores} cores: "
+            f"wall {t:.0f} s ({t / 60:.1f} min), a core idle {idle:.0f} s"
+        )
     if args.png:
         draw(jobs, wall, args.png)
         print(f"chart: {args.png}")
