@@ -13,14 +13,16 @@ share of the wall time in which fewer than ``--cores`` were busy and which job r
 alone then, and the longest jobs; draws a Gantt chart when ``--png`` is given.
 Jobs still running at the log's end are counted up to its last timestamp and flagged.
 
-With ``--simulate DAG.dot`` (``snakemake --forceall --dag > DAG.dot`` of the rules to
-judge) the measured jobs are scheduled again on ``--cores`` cores by the DAG's
-dependencies and the rules' ``priority`` (read from ``--rules``): whenever a core is
-free the ready job of highest priority starts, ties in the order the measured run
-started them.  Run it on the DAG of the rules that ran to check that it reproduces the
-measured wall time, then on another DAG for an estimate of what a change of the
-rules' order or dependencies does, without a second cold run.  An estimate: jobs the
-log does not hold take the mean of their rule's measured jobs, else 0 s.
+With ``--simulate DRYRUN`` (the terminal output of ``snakemake -n --forceall`` of the
+rules to judge, which lists every job with its inputs, outputs and priority) the
+measured jobs are scheduled again on ``--cores`` cores by their dependencies (an input
+another job writes) and priorities: whenever a core is free the ready job of highest
+priority starts, ties in the order the measured run started them.  Run it on the dry
+run of the rules that ran to see how closely it reproduces the measured wall time,
+then on another dry run for an estimate of what a change of the rules' order or
+dependencies does, without a second cold run.  An estimate: jobs the log does not
+hold take the mean of their rule's measured jobs (else 0 s), and jobs still running at
+the log's end their time so far (a lower bound; the output says how many).
 Not a test: a measurement of one run on one machine.
 """
 
@@ -66,6 +68,7 @@ def parse_log(text: str) -> tuple[list[Job], float]:
     t0 = last = None
     stamp = None
     pending: Job | None = None
+    failing = False
     for line in text.splitlines():
         m = STAMP.match(line)
         if m:
@@ -80,7 +83,7 @@ def parse_log(text: str) -> tuple[list[Job], float]:
             last = max(last, datetime.strptime(m.group(1), "%Y-%m-%d %H:%M:%S").timestamp())
             continue
         if m := RULE.match(line):
-            pending = Job(jobid=-1, rule=m.group(1), start=stamp - t0)
+            pending, failing = Job(jobid=-1, rule=m.group(1), start=stamp - t0), False
         elif pending is not None and (m := JOBID.match(line)):
             pending.jobid = int(m.group(1))
             jobs[pending.jobid] = pending
@@ -92,10 +95,13 @@ def parse_log(text: str) -> tuple[list[Job], float]:
             job = jobs.get(int(m.group(1)))
             if job is not None:
                 job.end = stamp - t0
-        elif m := ERROR.match(line):
-            for job in jobs.values():
-                if job.rule == m.group(1) and job.end is None:
-                    job.end, job.failed = stamp - t0, True
+        elif ERROR.match(line):
+            failing = True  # the failed job's jobid follows on its own line
+        elif failing and (m := JOBID.match(line)):
+            job = jobs.get(int(m.group(1)))
+            if job is not None and job.end is None:
+                job.end, job.failed = stamp - t0, True
+            failing = False
     if t0 is None:
         raise SystemExit("no timestamps in the log: is it the terminal output of a Snakemake run?")
     return list(jobs.values()), last - t0
@@ -115,83 +121,95 @@ def busy_profile(jobs: list[Job], wall: float, cores: int) -> tuple[float, float
     return busy_area / wall if wall else 0.0, under, spans
 
 
-NODE = re.compile(r'^\s*(\d+)\[label = "([^"]*)"')
-EDGE = re.compile(r"^\s*(\d+) -> (\d+)")
-PRIORITY_RULE = re.compile(r"^(?:local)?rule (\w+):")
-PRIORITY = re.compile(r"^\s+priority: (\d+)")
+FILES = re.compile(r"^\s+(input|output): (.*)$")
+PRIORITY = re.compile(r"^\s+priority: (-?\d+)$")
 
 
-def _key(rule: str, wildcards: dict[str, str]) -> str:
-    return rule + "[" + ", ".join(f"{k}={wildcards[k]}" for k in sorted(wildcards)) + "]"
+def _key(rule: str, wildcards: str) -> str:
+    return f"{rule}[{wildcards}]" if wildcards else rule
 
 
-def _log_key(job: Job) -> str:
-    pairs = [w.split("=", 1) for w in job.wildcards.split(", ")] if job.wildcards else []
-    return _key(job.rule, {k.strip(): v.strip() for k, v in pairs})
+@dataclass
+class PlannedJob:
+    """One job of a dry run: its key (rule[wildcards]), the files it reads and writes, its priority."""
+
+    key: str
+    inputs: list[str]
+    outputs: list[str]
+    priority: int = 0
 
 
-def read_dag(dot: str) -> tuple[dict[int, str], dict[int, set[int]]]:
-    """Jobs (id -> rule[wildcards]) and their dependencies (id -> ids it waits for) of ``snakemake --dag``."""
-    nodes, deps = {}, {}
-    for line in dot.splitlines():
-        if m := NODE.match(line):
-            rule, *wc = m.group(2).split("\\n")
-            nodes[int(m.group(1))] = _key(rule, dict(w.split(": ", 1) for w in wc))
-            deps.setdefault(int(m.group(1)), set())
-        elif m := EDGE.match(line):
-            deps.setdefault(int(m.group(2)), set()).add(int(m.group(1)))
-    return nodes, deps
+def read_plan(text: str) -> tuple[dict[int, PlannedJob], dict[int, set[int]]]:
+    """Jobs of a dry run (``snakemake -n``) by jobid, and the jobids each waits for (an input another job writes)."""
+    jobs: dict[int, PlannedJob] = {}
+    cur: dict | None = None
 
+    def close():
+        if cur and cur.get("jobid") is not None:
+            jobs[cur["jobid"]] = PlannedJob(
+                _key(cur["rule"], cur.get("wildcards", "")),
+                cur.get("input", []),
+                cur.get("output", []),
+                cur.get("priority", 0),
+            )
 
-def read_priorities(paths: list[Path]) -> dict[str, int]:
-    """``priority`` per rule of the given Snakemake files (rules without one: 0)."""
-    out, rule = {}, None
-    for path in paths:
-        for line in path.read_text().splitlines():
-            if m := PRIORITY_RULE.match(line):
-                rule = m.group(1)
-            elif rule and (m := PRIORITY.match(line)):
-                out[rule] = int(m.group(1))
-    return out
+    for line in text.splitlines():
+        if m := RULE.match(line):
+            close()
+            cur = {"rule": m.group(1)}
+        elif cur is None:
+            continue
+        elif m := FILES.match(line):
+            cur[m.group(1)] = [f.strip() for f in m.group(2).split(", ")]
+        elif m := JOBID.match(line):
+            cur["jobid"] = int(m.group(1))
+        elif m := WILDCARDS.match(line):
+            cur["wildcards"] = m.group(1)
+        elif m := PRIORITY.match(line):
+            cur["priority"] = int(m.group(1))
+    close()
+    writer = {f: j for j, job in jobs.items() for f in job.outputs}
+    deps = {j: {writer[f] for f in job.inputs if f in writer and writer[f] != j} for j, job in jobs.items()}
+    return jobs, deps
 
 
 def simulate(
-    jobs: list[Job], nodes: dict[int, str], deps: dict[int, set[int]], priority: dict[str, int], cores: int
-) -> tuple[float, float, int]:
-    """(wall time, seconds with a core idle, jobs without a measured time) of the DAG on ``cores`` cores, s."""
-    measured = {_log_key(j): j for j in jobs if j.end is not None and not j.failed}
+    jobs: list[Job], plan: dict[int, PlannedJob], deps: dict[int, set[int]], cores: int, wall: float
+) -> tuple[float, float, int, int]:
+    """(wall time, core-seconds idle, jobs without a measured time, jobs still running in the log) of the plan, s."""
+    measured = {j.name: j for j in jobs if not j.failed}
     by_rule: dict[str, list[float]] = {}
     for j in measured.values():
-        by_rule.setdefault(j.rule, []).append(j.end - j.start)
-    dur, order, unmeasured = {}, {}, 0
-    for n, key in nodes.items():
-        rule = key.split("[", 1)[0]
-        if key in measured:
-            dur[n], order[n] = measured[key].end - measured[key].start, measured[key].start
+        if j.end is not None:
+            by_rule.setdefault(j.rule, []).append(j.end - j.start)
+    dur, order, unmeasured, running_in_log = {}, {}, 0, 0
+    for n, job in plan.items():
+        rule = job.key.split("[", 1)[0]
+        if job.key in measured:
+            j = measured[job.key]
+            running_in_log += j.end is None
+            dur[n], order[n] = (j.end if j.end is not None else wall) - j.start, j.start
         else:
             dur[n] = sum(by_rule[rule]) / len(by_rule[rule]) if rule in by_rule else 0.0
             order[n], unmeasured = -1.0, unmeasured + 1
     done: set[int] = set()
     running: list[tuple[float, int]] = []
     t = idle = 0.0
-    pending = set(nodes)
+    pending = set(plan)
     while pending or running:
-        ready = sorted(
-            (n for n in pending if deps.get(n, set()) <= done),
-            key=lambda n: (-priority.get(nodes[n].split("[", 1)[0], 0), order[n]),
-        )
+        ready = sorted((n for n in pending if deps[n] <= done), key=lambda n: (-plan[n].priority, order[n]))
         while ready and len(running) < cores:
             n = ready.pop(0)
             pending.discard(n)
             running.append((t + dur[n], n))
         if not running:
-            raise SystemExit("the DAG has a cycle or a job waits for one it does not hold")
+            raise SystemExit("the dry run has a cycle or a job waits for one it does not hold")
         running.sort()
         t_next, n = running.pop(0)
         idle += (cores - len(running) - 1) * (t_next - t)
         t = t_next
         done.add(n)
-    return t, idle, unmeasured
+    return t, idle, unmeasured, running_in_log
 
 
 def draw(jobs: list[Job], wall: float, png: Path) -> None:
@@ -232,13 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cores", type=int, default=2)
     ap.add_argument("--png", type=Path)
     ap.add_argument("--top", type=int, default=12, help="longest jobs to list")
-    ap.add_argument("--simulate", type=Path, nargs="+", help="DAG files (snakemake --forceall --dag) to schedule")
-    ap.add_argument(
-        "--rules",
-        type=Path,
-        nargs="+",
-        help="Snakemake files whose priorities the schedule takes, one set per DAG (default: ./Snakefile rules/*.smk)",
-    )
+    ap.add_argument("--simulate", type=Path, nargs="+", help="dry runs (snakemake -n --forceall) to schedule")
     args = ap.parse_args(argv)
     jobs, wall = parse_log(args.log.read_text())
     job_s = sum(((j.end if j.end is not None else wall) - j.start) * j.threads for j in jobs)
@@ -265,13 +277,13 @@ def main(argv: list[str] | None = None) -> int:
         end = j.end if j.end is not None else wall
         flag = " (still running)" if j.end is None else (" (failed)" if j.failed else "")
         print(f"  {end - j.start:7.0f}  {j.start / 60:6.1f}-{end / 60:6.1f} min  {j.name}{flag}")
-    for dag in args.simulate or []:
-        files = args.rules or [Path("Snakefile"), *sorted(Path("rules").glob("*.smk"))]
-        nodes, deps = read_dag(dag.read_text())
-        t, idle, unmeasured = simulate(jobs, nodes, deps, read_priorities(files), args.cores)
+    for dry in args.simulate or []:
+        plan, deps = read_plan(dry.read_text())
+        t, idle, unmeasured, lower = simulate(jobs, plan, deps, args.cores, wall)
         print(
-            f"{dag}: {len(nodes)} jobs ({unmeasured} without a measured time) scheduled on {args.cores} cores: "
-            f"wall {t:.0f} s ({t / 60:.1f} min), a core idle {idle:.0f} s"
+            f"{dry}: {len(plan)} jobs scheduled on {args.cores} cores: wall {t:.0f} s ({t / 60:.1f} min), "
+            f"a core idle {idle:.0f} s; {unmeasured} jobs without a measured time (their rule's mean), "
+            f"{lower} still running in the log (their time so far)"
         )
     if args.png:
         draw(jobs, wall, args.png)

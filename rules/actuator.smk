@@ -189,7 +189,6 @@ rule mapping_2d3d:
         "logs/surrogates/mapping_2d3d.log",
     benchmark:
         "results/benchmarks/rules/mapping_2d3d.tsv"
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:

@@ -47,6 +47,7 @@ rule fidelity_fem_choice:
         "logs/fidelity/fidelity_fem_choice.log",
     benchmark:
         "results/benchmarks/rules/fidelity_fem_choice.tsv"
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -56,8 +57,9 @@ rule fidelity_fem_choice:
         "../workflow/scripts/fidelity_fem_choice.py"
 
 
-# One model's choice alone, from that model's cases only (the same choice as fem.nc's row for it): the 2D sweeps,
-# the 2D surrogate and the stiffness study then start while the 3D fine cases still run, instead of waiting for them.
+# One model's choice alone, from that model's cases only (the same choice as fem.nc's row for it): the 2D sweep
+# shards and their merge then run while the 3D fine cases still hold a core (the 2D surrogate still waits for the
+# cross-validation, which compares both models).
 rule fidelity_fem_model_choice:
     input:
         cases=lambda wc: expand("results/fidelity/fem/{case}.nc", case=FEM_MODEL_CASES[wc.model]),
@@ -70,6 +72,7 @@ rule fidelity_fem_model_choice:
         "results/benchmarks/rules/fidelity_fem_choice_{model}.tsv"
     wildcard_constraints:
         model="2d|3d",
+    priority: 5
     conda:
         "../envs/project.yaml"
     params:
