@@ -84,9 +84,6 @@ rule sweep_shard:
     wildcard_constraints:
         fea="2d|3d",
         shard=r"\d+",
-    # the cold run's critical path (sweeps -> surrogates -> plans -> the check's mesh study -> the checks)
-    # goes before the studies beside it, which then fill the cores the path leaves idle
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -109,7 +106,6 @@ rule sweep_merge:
         "results/benchmarks/rules/sweep_merge_{fea}.tsv"
     wildcard_constraints:
         fea="2d|3d",
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -131,7 +127,6 @@ rule surrogate_cv:
         "logs/surrogates/surrogate_cv.log",
     benchmark:
         "results/benchmarks/rules/surrogate_cv.tsv"
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -162,7 +157,6 @@ rule surrogate_fit:
         "results/benchmarks/rules/surrogate_fit_{fea}.tsv"
     wildcard_constraints:
         fea="2d|3d",
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:

@@ -26,7 +26,6 @@ rule cascade_plan:
         "logs/cascade/cascade_plan/{patient}.log",
     benchmark:
         "results/benchmarks/rules/cascade_plan_{patient}.tsv"
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:

@@ -340,10 +340,6 @@ def get_fem_choice_slice():
 
 # --- Stage fidelity -----------------------------------
 FEM_CASES = [c.name for c in fidelity_choice.fem_cases(config["fidelity"]["fem_cases"])]
-FEM_MODEL_CASES = {
-    m: [c.name for c in fidelity_choice.fem_cases(config["fidelity"]["fem_cases"]) if c.model == m]
-    for m in ("2d", "3d")
-}
 
 
 def fidelity_auto():
@@ -351,17 +347,8 @@ def fidelity_auto():
 
 
 def get_fem_choice(wildcards):
-    """Input function: the FE study's choice of mesh, when fidelity.auto picks it.
-
-    A job of one model (a sweep shard, wildcard ``fea``) waits only for that model's cases, so the 2D branch does
-    not wait for the 3D fine meshes; a model without cases in the study takes the whole study's file (which says so).
-    """
-    if not fidelity_auto():
-        return {}
-    model = wildcards.get("fea")
-    if model in FEM_MODEL_CASES and FEM_MODEL_CASES[model]:
-        return {"fidelity": f"results/fidelity/fem_{model}.nc"}
-    return {"fidelity": "results/fidelity/fem.nc"}
+    """Input function: the FE study's choice of mesh, when fidelity.auto picks it."""
+    return {"fidelity": "results/fidelity/fem.nc"} if fidelity_auto() else {}
 
 
 def get_opensim_model(wildcards):

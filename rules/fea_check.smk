@@ -34,7 +34,6 @@ rule fea_check:
         "logs/fea_check/fea_check/{patient}.log",
     benchmark:
         "results/benchmarks/rules/fea_check_{patient}.tsv"
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:

@@ -6,9 +6,7 @@
 # and entry_fem.py (the FE cases, on their own so judging the study does not rerun its FEA).
 # Input functions live in rules/common.smk:
 #   FEM_CASES               -> the FE unit cases of fidelity.fem_cases (names)
-#   FEM_MODEL_CASES         -> the same per model ("2d", "3d")
-#   get_fem_choice(wc)      -> {"fidelity": results/fidelity/fem.nc} when fidelity.auto, else {}; a sweep shard
-#                              of one model takes that model's choice alone (results/fidelity/fem_{model}.nc)
+#   get_fem_choice(wc)      -> {"fidelity": results/fidelity/fem.nc} when fidelity.auto, else {}
 #   get_msk_choice(wc)      -> the musculoskeletal study (+ OpenSim model) when fidelity.auto
 #   get_check_choice(wc)    -> the patient's check study when fidelity.auto
 
@@ -47,32 +45,6 @@ rule fidelity_fem_choice:
         "logs/fidelity/fidelity_fem_choice.log",
     benchmark:
         "results/benchmarks/rules/fidelity_fem_choice.tsv"
-    priority: 5
-    conda:
-        "../envs/project.yaml"
-    params:
-        tolerance=get_fem_tolerances(),
-        config_slice=get_fem_choice_slice(),
-    script:
-        "../workflow/scripts/fidelity_fem_choice.py"
-
-
-# One model's choice alone, from that model's cases only (the same choice as fem.nc's row for it): the 2D sweep
-# shards and their merge then run while the 3D fine cases still hold a core (the 2D surrogate still waits for the
-# cross-validation, which compares both models).
-rule fidelity_fem_model_choice:
-    input:
-        cases=lambda wc: expand("results/fidelity/fem/{case}.nc", case=FEM_MODEL_CASES[wc.model]),
-        code=code_files("scripts.fidelity_fem_choice"),
-    output:
-        "results/fidelity/fem_{model}.nc",
-    log:
-        "logs/fidelity/fidelity_fem_choice_{model}.log",
-    benchmark:
-        "results/benchmarks/rules/fidelity_fem_choice_{model}.tsv"
-    wildcard_constraints:
-        model="2d|3d",
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:
@@ -122,7 +94,6 @@ rule fidelity_check:
         "logs/fidelity/fidelity_check/{patient}.log",
     benchmark:
         "results/benchmarks/rules/fidelity_check_{patient}.tsv"
-    priority: 5
     conda:
         "../envs/project.yaml"
     params:

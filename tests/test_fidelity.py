@@ -110,32 +110,6 @@ def test_fem_choice_picks_the_cheapest_case_within_tolerance(tmp_path):
     assert act["mesh"]["h_2d_mm"] == 2.0 and attrs["fidelity"] == "config"
 
 
-def test_one_models_choice_from_its_own_cases_is_the_whole_studys_row_for_it(tmp_path):
-    """The 2D sweeps take fem_2d.nc (2D cases only) so they need not wait for the 3D cases: same choice, same reason."""
-    from workflow.fidelity.entry import write_fem_choice
-
-    cases = [
-        _case("fem_2d_h2_contact", [8, 20, 28], [0.05, 0.12, 0.20], wall=1),
-        _case("fem_2d_h1_contact", [8.5, 21, 29.5], [0.05, 0.13, 0.21], wall=4),
-        _case("fem_2d_h0.5_contact", [8.6, 21.3, 30], [0.051, 0.13, 0.21], wall=20),
-        _case("fem_3d_h2_contact", [3, 6, 9], [0.02, 0.07, 0.12], wall=10),
-        _case("fem_3d_h1_contact", [3.5, 6.5, 9.5], [0.021, 0.071, 0.125], wall=90),
-    ]
-    files = []
-    for c in cases:
-        files.append(tmp_path / f"{c.attrs['case']}.nc")
-        c.to_netcdf(files[-1])
-    whole = write_fem_choice(files, tmp_path / "fem.nc", tolerance=0.03, config_slice={})
-    for model in ("2d", "3d"):
-        own = write_fem_choice(
-            [f for f in files if f"_{model}_" in f.name], tmp_path / f"fem_{model}.nc", tolerance=0.03, config_slice={}
-        )
-        assert own["model_choice"].values.tolist() == [model]
-        for v in ("chosen_case", "chosen_h_mm", "chosen_contact", "choice_reason"):
-            assert own[v].sel(model_choice=model).item() == whole[v].sel(model_choice=model).item(), v
-        assert fidelity_choice.apply_fem_choice({}, own, model) == fidelity_choice.apply_fem_choice({}, whole, model)
-
-
 def test_check_choice_takes_the_coarsest_mesh_whose_angles_stay_close():
     a2 = [[30.0, 10, 0], [37.0, 12, 0], [38.0, 12.5, 0], [38.5, 12.6, 0]]  # TGE2 by mesh
     a1 = [[9.0, 0, 1], [10.5, 0, 1], [9.8, 0, 1], [9.6, 0, 1]]  # TGE1 by mesh
