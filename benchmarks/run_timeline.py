@@ -220,24 +220,33 @@ def draw(jobs: list[Job], wall: float, png: Path) -> None:
     import matplotlib.pyplot as plt
 
     order = sorted(jobs, key=lambda j: j.start)
-    rules = sorted({j.rule for j in jobs})
-    colours = {r: plt.cm.tab20(i % 20) for i, r in enumerate(rules)}
+    # rules with a job over 2 % of the run get a colour of their own (tab10, distinct), the rest grey
+    long = sorted({j.rule for j in jobs if ((j.end if j.end is not None else wall) - j.start) > 0.02 * wall})
+    colours = {r: plt.cm.tab10(i % 10) for i, r in enumerate(long)}
     fig, ax = plt.subplots(figsize=(11, max(4, 0.12 * len(order))))
     for row, j in enumerate(order):
         end = j.end if j.end is not None else wall
+        c = colours.get(j.rule, "0.85")
+        # failed jobs outlined, jobs still running at the log's end hatched
         ax.barh(
-            row, (end - j.start) / 60, left=j.start / 60, color=colours[j.rule], edgecolor="k" if j.failed else None
+            row,
+            (end - j.start) / 60,
+            left=j.start / 60,
+            color=c,
+            edgecolor="k" if j.failed else None,
+            hatch="//" if j.end is None else None,
         )
     ax.set_yticks([])
     ax.invert_yaxis()
     ax.set_xlabel("wall time since the run's start (min)")
+    ax.set_ylabel("jobs in start order")
     ax.set_title(f"{len(jobs)} jobs, {wall / 60:.1f} min")
-    long = sorted({j.rule for j in jobs if ((j.end or wall) - j.start) > 0.02 * wall})
+    # the bars run from top left to bottom right: the legend goes top right
     ax.legend(
         handles=[plt.Rectangle((0, 0), 1, 1, color=colours[r]) for r in long],
         labels=long,
-        fontsize=7,
-        loc="lower right",
+        fontsize=8,
+        loc="upper right",
     )
     png.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
