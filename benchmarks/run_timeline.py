@@ -59,7 +59,7 @@ class Job:
 
     @property
     def name(self) -> str:
-        return f"{self.rule}[{self.wildcards}]" if self.wildcards else self.rule
+        return _key(self.rule, self.wildcards)  # the same key as a dry run's job, so the replay can match them
 
 
 def parse_log(text: str) -> tuple[list[Job], float]:
