@@ -495,3 +495,22 @@ def test_3d_search_skips_only_slaves_out_of_reach(monkeypatch):
         np.testing.assert_array_equal(n[ok0], n0[ok0])
         skipped += int(np.isinf(g).sum())
     assert skipped > 0  # the filter did skip some
+
+
+@pytest.mark.parametrize("summed", [False, True])
+def test_skin_under_a_gap_between_two_blocks_feels_a_continuous_force(summed):
+    """A slave 0.02 mm below the gap between two master walls (two blocks' bottoms 1 mm apart, their extensions
+    past the free edges overlapping) slides across the gap: with the extensions summed its force changes by less
+    than 2 % of its largest value between samples 0.005 mm apart; choosing the nearer wall alone jumps by 34 % of it."""
+    p = np.array([[-2.0, -0.5, 0.5, 2.0, 0.0, 10.0], [0.0, 0.0, -0.03, -0.03, -0.02, -50.0]])
+    pair = ContactPair(p, np.array([[4, 5]]), np.array([[0, 1], [2, 3]]), search=1.0, extend=0.5, smoothing=0.1)
+    pair.sum_extensions = summed
+    forces = []
+    for xs in np.linspace(-0.6, 0.6, 241):
+        x = p.copy()
+        x[0, 4] = xs
+        dofs, f, _, _ = pair.evaluate(x, 1.0, tangent=False)
+        forces.append(np.bincount(dofs.ravel(), weights=f.ravel(), minlength=12))
+    forces = np.array(forces)
+    jump = np.abs(np.diff(forces, axis=0)).max() / np.abs(forces).max()
+    assert (jump < 0.02) if summed else (jump > 0.3)

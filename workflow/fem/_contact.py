@@ -40,6 +40,11 @@ Smoothing removes the normal's jump across an edge, not the kink of the
 bilinear shape functions there (a slave on a master edge moves its force
 between the edge's nodes and the next ones at a rate that jumps).
 
+Summed extensions (2D, frictionless, ``sum_extensions``): a slave whose projection lies past the free edges of two
+masters at once (the skin under the gap between two blocks' bottom faces, whose extensions overlap) presses on both,
+each with its own faded penalty.  Choosing the nearer one makes the force jump from one block's corner to the other's
+where that choice flips.
+
 Friction (``mu`` > 0; frictionless by default, as the paper's Marc model): regularised Coulomb.  A slave
 that comes into contact sticks, at the end of that load step (``commit``), to the master point it touches, as
 (facet, xi); afterwards a tangential penalty eps_t = ``friction_factor`` * eps per unit area holds it there, with
@@ -468,6 +473,10 @@ class ContactPair:
         # at the accepted step where it came into contact (`commit`); -1 = none
         self.mu = 0.0
         self.friction_factor = 0.1
+        #: 2D, frictionless: a slave in the extensions of two walls' free edges at once (the skin under the gap between
+        #: two blocks) presses on both, each with its faded penalty, instead of on the nearer one (see
+        #: ``_extension_partners``)
+        self.sum_extensions = False
         self.anchor_facet = -np.ones(self.slave.size, dtype=np.int64)
         self.anchor_xi = np.zeros((self.slave.size, 2))
         # allowed parameter range per master facet: [0, 1] (2D) / [-1, 1]^2 (3D), widened at free edges
@@ -624,6 +633,36 @@ class ContactPair:
 
     def _project_2d(self, x: np.ndarray, xs: np.ndarray):
         """2D: closest master facet per slave among the 3 nearest by straight clipped distance."""
+        cand, xi, n, g, within, dist = self._candidates_2d(x, xs)
+        j = np.argmin(np.where(within, dist, dist + 1e6), axis=1)
+        s = np.arange(xs.shape[0])
+        xi_s = xi[s, j]
+        N = np.stack([1.0 - xi_s, xi_s], axis=1)
+        return cand[s, j], N, n[s, j], g[s, j], within[s, j]
+
+    def _extension_partners(self, x: np.ndarray):
+        """2D: (slave index, facet, gap) of every slave whose projection lies past the free edge of a facet other
+        than the one ``_project`` chose for it (and, beside that one, the nearest such).
+
+        Between two blocks the bottom faces' extensions overlap; a skin node under the gap would otherwise press on
+        whichever block's corner is nearer by straight distance, and its force would jump from one corner to the
+        other when that flips (measured: a two-cycle of Newton between the two corners, the finger-actuator check of
+        TGE3 stalling at 29 % of its load).  Summed, each contribution fades to zero at its own extension's end, so
+        the force stays continuous.
+        """
+        xs = x[:, self.slave].T
+        cand, xi, n, g, within, dist = self._candidates_2d(x, xs)
+        ext = within & (((xi < 0) & (self.lo[cand] < 0)) | ((xi > 1) & (self.hi[cand] > 1)))
+        j = np.argmin(np.where(within, dist, dist + 1e6), axis=1)
+        s = np.arange(xs.shape[0])
+        other = ext & (cand != cand[s, j][:, None])
+        k = np.argmin(np.where(other, dist, np.inf), axis=1)
+        has = other.any(axis=1)
+        idx = np.flatnonzero(has)
+        return idx, cand[idx, k[idx]], g[idx, k[idx]]
+
+    def _candidates_2d(self, x: np.ndarray, xs: np.ndarray):
+        """The 3 nearest facets per slave by straight clipped distance: (facet, xi, n, g, within range, distance)."""
         ns = xs.shape[0]
         xa0 = x[:, self.master[self._pool, 0]].transpose(1, 2, 0)  # (ns, width, 2)
         xb0 = x[:, self.master[self._pool, 1]].transpose(1, 2, 0)
@@ -644,11 +683,7 @@ class ContactPair:
         # one of its two facets, and both give the same gap at the node
         within = (xi >= self.lo[cand] - 1e-6) & (xi <= self.hi[cand] + 1e-6)
         dist = np.linalg.norm(xs[:, None, :] - xa - np.clip(xi, 0.0, 1.0)[..., None] * t, axis=2)
-        j = np.argmin(np.where(within, dist, dist + 1e6), axis=1)
-        s = np.arange(ns)
-        xi_s = xi[s, j]
-        N = np.stack([1.0 - xi_s, xi_s], axis=1)
-        return cand[s, j], N, n[s, j], g[s, j], within[s, j]
+        return cand, xi, n, g, within, dist
 
     def _local_force(self, X: np.ndarray, eps_area: np.ndarray, lim: tuple, return_normal: bool = False):
         """Penalty force eps A w g dg (nc, nn*dim) for local node sets X (nc, nn, dim) = slave + master facet.
@@ -833,12 +868,17 @@ class ContactPair:
         gmin = float(g[ok].min()) if ok.any() else np.inf
         act = ok & (g < self.smoothing)
         dim = self.dim
-        if not act.any():
+        idx, fac = np.flatnonzero(act), m[act]
+        if self.sum_extensions and dim == 2 and not self._friction_on():
+            i2, m2, g2 = self._extension_partners(x)
+            keep = (np.abs(g2) <= self.search) & (g2 < self.smoothing)
+            idx, fac = np.concatenate([idx, i2[keep]]), np.concatenate([fac, m2[keep]])
+        if not idx.size:
             return np.zeros((0, 0), int), np.zeros((0, 0)), (np.zeros((0, 0, 0)) if tangent else None), gmin
         friction = self._friction_on()
-        nodes, lim, has, xi0 = self._stencil(np.flatnonzero(act), m[act])
+        nodes, lim, has, xi0 = self._stencil(idx, fac)
         X = x[:, nodes].transpose(1, 2, 0)  # (nc, nn, dim)
-        w = eps * self.penalty_factor * self.area[act]
+        w = eps * self.penalty_factor * self.area[idx]
         # a slave without an anchor (it came into contact during this step) gets the normal force alone
         if dim == 3 and len(lim) == 3:  # the projection along smoothed normals, once: the start of every copy's
             lim = lim + (self._smooth_local_3d(X, lim)[0],)

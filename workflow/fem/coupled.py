@@ -7,7 +7,8 @@ bone (3), the last three compressible neo-Hooke (valid under large rotation).
 Couplings:
 
 * frictionless penalty contact between the finger's dorsal skin and the
-  actuator's bottom outer face, both ways (each side slave once), besides the
+  actuator's bottom outer face, both ways (each side slave once; skin under a
+  gap between two blocks touches both blocks' corners), besides the
   actuator's self-contact across its gaps;
 * straps at PIP and DIP: ``StrapSpring`` from the actuator's bottom-face node
   above the joint to the point of the dorsal skin above the joint centre,
@@ -284,6 +285,8 @@ def coupled_model(
         ContactPair(p, skin, bottom, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
         ContactPair(p, bottom, skin, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
     ]
+    for pair in finger_pairs:  # the skin under a gap between two blocks touches both blocks' corners
+        pair.sum_extensions = True
     model = Model(
         setup.solid,
         pressures=group_pressures(cm.act, pressures_kpa) if pressures_kpa else {},
