@@ -503,8 +503,9 @@ def test_skin_under_a_gap_between_two_blocks_feels_a_continuous_force(summed):
     past the free edges overlapping) slides across the gap: with the extensions summed its force changes by less
     than 2 % of its largest value between samples 0.005 mm apart; choosing the nearer wall alone jumps by 34 % of it."""
     p = np.array([[-2.0, -0.5, 0.5, 2.0, 0.0, 10.0], [0.0, 0.0, -0.03, -0.03, -0.02, -50.0]])
-    pair = ContactPair(p, np.array([[4, 5]]), np.array([[0, 1], [2, 3]]), search=1.0, extend=0.5, smoothing=0.1)
-    pair.sum_extensions = summed
+    pair = ContactPair(
+        p, np.array([[4, 5]]), np.array([[0, 1], [2, 3]]), search=1.0, extend=0.5, smoothing=0.1, sum_extensions=summed
+    )
     forces = []
     for xs in np.linspace(-0.6, 0.6, 241):
         x = p.copy()

@@ -369,6 +369,7 @@ class ContactPair:
         smoothing: float = 0.0,
         smooth_normals: bool = True,
         penalty_factor: float = 1.0,
+        sum_extensions: bool = False,
     ):
         slaves = slave_facets if isinstance(slave_facets, (list, tuple)) else [slave_facets]
         masters = master_facets if isinstance(master_facets, (list, tuple)) else [master_facets]
@@ -389,6 +390,7 @@ class ContactPair:
             smooth_normals,
             penalty_factor,
         )
+        self.sum_extensions = bool(sum_extensions)
 
     @classmethod
     def self_contact(
@@ -633,16 +635,21 @@ class ContactPair:
 
     def _project_2d(self, x: np.ndarray, xs: np.ndarray):
         """2D: closest master facet per slave among the 3 nearest by straight clipped distance."""
-        cand, xi, n, g, within, dist = self._candidates_2d(x, xs)
+        return self._pick_2d(self._candidates_2d(x, xs))[0]
+
+    @staticmethod
+    def _pick_2d(cands):
+        """The chosen facet per slave from ``_candidates_2d``: (facet, N, n, g, inside), and its column j."""
+        cand, xi, n, g, within, dist = cands
         j = np.argmin(np.where(within, dist, dist + 1e6), axis=1)
-        s = np.arange(xs.shape[0])
+        s = np.arange(cand.shape[0])
         xi_s = xi[s, j]
         N = np.stack([1.0 - xi_s, xi_s], axis=1)
-        return cand[s, j], N, n[s, j], g[s, j], within[s, j]
+        return (cand[s, j], N, n[s, j], g[s, j], within[s, j]), j
 
-    def _extension_partners(self, x: np.ndarray):
+    def _extension_partners(self, cands, j: np.ndarray):
         """2D: (slave index, facet, gap) of every slave whose projection lies past the free edge of a facet other
-        than the one ``_project`` chose for it (and, beside that one, the nearest such).
+        than its chosen one (column ``j`` of ``_candidates_2d``'s ``cands``); of several, the nearest.
 
         Between two blocks the bottom faces' extensions overlap; a skin node under the gap would otherwise press on
         whichever block's corner is nearer by straight distance, and its force would jump from one corner to the
@@ -650,12 +657,9 @@ class ContactPair:
         TGE3 stalling at 29 % of its load).  Summed, each contribution fades to zero at its own extension's end, so
         the force stays continuous.
         """
-        xs = x[:, self.slave].T
-        cand, xi, n, g, within, dist = self._candidates_2d(x, xs)
+        cand, xi, _, g, within, dist = cands
         ext = within & (((xi < 0) & (self.lo[cand] < 0)) | ((xi > 1) & (self.hi[cand] > 1)))
-        j = np.argmin(np.where(within, dist, dist + 1e6), axis=1)
-        s = np.arange(xs.shape[0])
-        other = ext & (cand != cand[s, j][:, None])
+        other = ext & (cand != cand[np.arange(cand.shape[0]), j][:, None])
         k = np.argmin(np.where(other, dist, np.inf), axis=1)
         has = other.any(axis=1)
         idx = np.flatnonzero(has)
@@ -863,14 +867,19 @@ class ContactPair:
         the active slaves, with ``gmin`` the smallest gap over all slaves that
         project inside a master facet (negative = largest penetration, mm).
         """
-        m, N, n, g, inside = self._project(x)
+        dim = self.dim
+        partners = self.sum_extensions and dim == 2 and not self._friction_on()
+        if partners:  # one candidate search for the chosen facets and the partners
+            cands = self._candidates_2d(x, x[:, self.slave].T)
+            (m, N, n, g, inside), j = self._pick_2d(cands)
+        else:
+            m, N, n, g, inside = self._project(x)
         ok = inside & (np.abs(g) <= self.search)
         gmin = float(g[ok].min()) if ok.any() else np.inf
         act = ok & (g < self.smoothing)
-        dim = self.dim
         idx, fac = np.flatnonzero(act), m[act]
-        if self.sum_extensions and dim == 2 and not self._friction_on():
-            i2, m2, g2 = self._extension_partners(x)
+        if partners:
+            i2, m2, g2 = self._extension_partners(cands, j)
             keep = (np.abs(g2) <= self.search) & (g2 < self.smoothing)
             idx, fac = np.concatenate([idx, i2[keep]]), np.concatenate([fac, m2[keep]])
         if not idx.size:

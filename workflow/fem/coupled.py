@@ -281,12 +281,11 @@ def coupled_model(
     pairs = self_contact_pairs(cm.um, c)
     skin, bottom = cm.um.facets["finger_dorsal"], cm.um.facets["outer_bottom"]
     fac = float(c["finger_penalty"]) / eps  # own penalty (see the module docstring)
+    # the skin under a gap between two blocks touches both blocks' corners (sum_extensions)
     finger_pairs = [
-        ContactPair(p, skin, bottom, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
-        ContactPair(p, bottom, skin, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac),
+        ContactPair(p, a, b, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac, sum_extensions=True)
+        for a, b in ((skin, bottom), (bottom, skin))
     ]
-    for pair in finger_pairs:  # the skin under a gap between two blocks touches both blocks' corners
-        pair.sum_extensions = True
     model = Model(
         setup.solid,
         pressures=group_pressures(cm.act, pressures_kpa) if pressures_kpa else {},
