@@ -619,6 +619,40 @@ def test_a_stalled_whole_actuator_solve_is_retried_with_the_restarts_over_each_o
     assert res.status == 1 and res.load_factor == pytest.approx(0.5)  # the furthest of the two attempts
 
 
+@pytest.mark.parametrize("first, expected", [(0, [(0.01, 0.25), (0.1, 0.02)]), (1, [(0.1, 0.02)]), (5, [(0.1, 0.02)])])
+def test_gravity_starts_at_the_configured_attempt_of_the_restarts(monkeypatch, first, expected):
+    """fea_check.gravity_first_attempt = 1 solves gravity with the first restart from the start (the configured band
+    stalled on every mesh); 0 keeps the configured attempt first; an index past the list takes the last attempt."""
+    from dataclasses import dataclass, field
+    from types import SimpleNamespace
+
+    from workflow.fea_check import check as FC
+
+    @dataclass
+    class Setup:
+        contact: dict = field(default_factory=lambda: {"smoothing_mm": 0.01})
+
+    seen = []
+
+    def fake_solve(setup, pressures, solver=None, u_gravity=None):
+        seen.append((setup.contact["smoothing_mm"], solver.get("max_step")))
+        ok = setup.contact["smoothing_mm"] >= 0.1
+        return SimpleNamespace(
+            status=0 if ok else 1,
+            load_factor=1.0 if ok else 0.5,
+            joint_angles_deg=np.zeros(3),
+            newton_iterations=1,
+            wall_time_s=0.0,
+        )
+
+    monkeypatch.setattr(FC, "solve_coupled", fake_solve)
+    restarts = ({"contact": {"smoothing_mm": 0.1}, "solver": {"max_step": 0.02}},)
+    fea = SimpleNamespace(setup=Setup(), restarts=restarts, gravity_first_attempt=first)
+    assert FC.gravity_state(fea, {"max_step": 0.25}).status == 0
+    assert seen == expected
+    assert DEFAULT_FEA_CHECK["gravity_first_attempt"] == 1
+
+
 def test_an_exercise_ramps_from_the_gravity_state_with_the_contact_band_that_state_converged_with(monkeypatch):
     """Gravity converged only with the restart's wider band: the exercise's first attempt keeps that band (a
     narrower one would put the nodes resting inside the wide band deep into the penalty), its restarts apply over it."""

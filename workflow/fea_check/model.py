@@ -60,6 +60,8 @@ DEFAULT_FEA_CHECK: dict[str, Any] = {
     "penetration_bound_mm": 0.1,
     # the retry that passes the blocks' first corner contact (measured on the mean finger's gravity phase)
     "restarts": ({"contact": {"smoothing_mm": 0.1}, "solver": {"predictor": False, "max_step": 0.02}},),
+    # gravity starts at this attempt (0: as configured; 1: the first restart): its first attempt stalled on every mesh
+    "gravity_first_attempt": 1,
 }
 
 
@@ -140,6 +142,8 @@ class PatientFEA:
     #: retries of a stalled solve, each over the previous (config ``fea_check.restarts``): the blocks' first corner
     #: contact stalls the whole actuator as it stalls a unit ray; a wider band with small steps passes it
     restarts: tuple = ()
+    #: the attempt gravity starts at (config ``fea_check.gravity_first_attempt``; 0 = as configured)
+    gravity_first_attempt: int = 0
 
 
 def build_patient_fea(
@@ -220,5 +224,12 @@ def build_patient_fea(
     )
     restarts = tuple(fc["restarts"])
     return PatientFEA(
-        setup=setup, finger=finger, units_per_group=counts, width_mm=W, base_x_mm=base_x, notes=notes, restarts=restarts
+        setup=setup,
+        finger=finger,
+        units_per_group=counts,
+        width_mm=W,
+        base_x_mm=base_x,
+        notes=notes,
+        restarts=restarts,
+        gravity_first_attempt=int(fc["gravity_first_attempt"]),
     )
