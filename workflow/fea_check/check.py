@@ -94,7 +94,7 @@ def gravity_state(fea: PatientFEA, solver: Mapping) -> CoupledResult:
     first corner contact stalled gravity on every mesh and finger measured (at 5-60 % of the weight, 50-140 s lost
     each time), and the first restart, solved from zero again, is what every check then started from.
     """
-    grav = solve_with_restarts(fea, {}, solver, first_attempt=getattr(fea, "gravity_first_attempt", 0))
+    grav = solve_with_restarts(fea, {}, solver, first_attempt=fea.gravity_first_attempt)
     log.info(
         "gravity: status %d at load factor %.3f, droop %s deg, %d Newton iterations, %.1f s",
         grav.status,
