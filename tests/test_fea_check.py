@@ -300,6 +300,10 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     assert np.all(res.joint_angles_deg > 0)  # the finger droops (flexes) under its weight
     weight = abs(float(np.sum(fea.setup.gravity[1::2])))
     assert abs(res.slide_force) < 1e-3 * weight  # the regularising spring carries next to nothing
+    # the hand end slides as one (its nodes share u_x) and slide_mm is that shared displacement
+    clamp = fea.setup.cm.um.nodes["clamp"]
+    ux = res.u[2 * np.asarray(clamp)]
+    assert abs(res.slide_mm) > 1e-3 and np.allclose(ux, res.slide_mm, rtol=0, atol=1e-12)
 
 
 def test_the_layout_shift_moves_the_fe_actuator_as_the_chain_lays_it():

@@ -193,6 +193,15 @@ def fea_check_dataset(
                 np.array([c.result.tip_angle_deg for c in checks]),
                 {**deg, "long_name": "rotation of the actuator's backbone at its tip"},
             ),
+            "hand_slide_mm": (
+                "exercise",
+                np.array([c.result.slide_mm for c in checks]),
+                {
+                    "units": "mm",
+                    "long_name": "how far the actuator's hand end slides along the hand, distal positive (section 3.2's "
+                    "sliding support; the rail travel the pose needs)",
+                },
+            ),
             "newton_iterations": (
                 "exercise",
                 np.array([c.result.newton_iterations for c in checks], dtype="i4"),

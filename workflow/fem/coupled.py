@@ -330,6 +330,8 @@ class CoupledResult:
     ndofs: int
     overlap_depth_mm: float = 0.0  # deepest actuator node inside foreign material over both phases
     min_pocket_area_mm2: float = np.nan  # smallest pocket of the actuator over both phases
+    # displacement (mm) of the actuator's hand end along the hand, distal positive: the rail travel the pose needs
+    slide_mm: float = 0.0
     history: list = field(default_factory=list)
     u: np.ndarray | None = field(default=None, repr=False)
     state: np.ndarray | None = field(default=None, repr=False)  # u and the enhanced parameters
@@ -439,6 +441,7 @@ def solve_coupled(
         max_strap_force=max_strap,
         max_spring_moments=max_sm,
         slide_force=float(parts["slide"].force(u)[0]),
+        slide_mm=float(u[parts["slide"].dofs[0]]),
         max_penetration_mm=pen,
         overlap_depth_mm=overlap,
         min_pocket_area_mm2=pocket,
