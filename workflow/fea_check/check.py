@@ -75,8 +75,9 @@ def solve_with_restarts(
     """``solve_coupled``, and if it stalls, again from the same start with each of ``fea.restarts`` applied over the
     previous ones (contact band mm, solver options); the first full solve, else the one that got furthest.
 
-    ``contact`` (default the setup's) are the contact settings of the first attempt; ``first_attempt`` skips that
-    many attempts of the list (1: start with the first restart applied).
+    ``contact`` (default the setup's) are the contact settings of the first attempt; ``first_attempt`` starts at that
+    attempt of the list (1: with the first restart applied) and tries the ones it skipped last, so that a start the
+    restart cannot take (a wider band inverting an element at rest, as in the authors' section) still solves.
     """
 
     def solve(contact: dict, opts: dict) -> CoupledResult:
@@ -84,7 +85,8 @@ def solve_with_restarts(
 
     base = fea.setup.contact if contact is None else {**dict(fea.setup.contact or {}), **dict(contact)}
     attempts = cumulative_attempts(base, solver, fea.restarts)
-    return first_converged(attempts[min(first_attempt, len(attempts) - 1) :], solve, label="finger-actuator solve")[0]
+    k = min(first_attempt, len(attempts) - 1)
+    return first_converged(attempts[k:] + attempts[:k], solve, label="finger-actuator solve")[0]
 
 
 def gravity_state(fea: PatientFEA, solver: Mapping) -> CoupledResult:
