@@ -143,7 +143,7 @@ class PatientFEA:
     #: contact stalls the whole actuator as it stalls a unit ray; a wider band with small steps passes it
     restarts: tuple = ()
     #: the attempt gravity starts at (config ``fea_check.gravity_first_attempt``; 0 = as configured)
-    gravity_first_attempt: int = 0
+    gravity_first_attempt: int = DEFAULT_FEA_CHECK["gravity_first_attempt"]
 
 
 def build_patient_fea(
