@@ -78,6 +78,11 @@ def solve_with_restarts(
     ``contact`` (default the setup's) are the contact settings of the first attempt; ``first_attempt`` starts at that
     attempt of the list (1: with the first restart applied) and tries the ones it skipped last, so that a start the
     restart cannot take (a wider band inverting an element at rest, as in the authors' section) still solves.
+
+    From a solved state (``u_gravity``, an equilibrium of ``contact``) every attempt keeps those contact settings and
+    varies the solver options only: a band wider than the state's puts the nodes resting inside it deep into the
+    penalty at the first step (the authors' section, gravity solved with the configured band: each exercise's restart
+    with the wider band inverted an element at once). Attempts that become alike are tried once.
     """
 
     def solve(contact: dict, opts: dict) -> CoupledResult:
@@ -85,6 +90,9 @@ def solve_with_restarts(
 
     base = fea.setup.contact if contact is None else {**dict(fea.setup.contact or {}), **dict(contact)}
     attempts = cumulative_attempts(base, solver, fea.restarts)
+    if u_gravity is not None and contact is not None:
+        pinned = [(dict(base), s) for _, s in attempts]
+        attempts = [a for i, a in enumerate(pinned) if a not in pinned[:i]]
     k = min(first_attempt, len(attempts) - 1)
     return first_converged(attempts[k:] + attempts[:k], solve, label="finger-actuator solve")[0]
 
