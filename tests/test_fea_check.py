@@ -304,6 +304,11 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     clamp = fea.setup.cm.um.nodes["clamp"]
     ux = res.u[2 * np.asarray(clamp)]
     assert abs(res.slide_mm) > 1e-3 and np.allclose(ux, res.slide_mm, rtol=0, atol=1e-12)
+    # one bend per chamber of the actuator, adding up to its backbone's turn from the first segment to the last
+    d = np.diff(res.backbone_mm, axis=0)
+    turn = -np.degrees(np.arctan2(d[-1, 1], d[-1, 0]) - np.arctan2(d[0, 1], d[0, 0]))
+    assert res.unit_bends_deg.shape == (len(fea.setup.cm.act.chamber_group),)
+    assert res.unit_bends_deg.sum() == pytest.approx(turn, abs=1e-9)
 
 
 def test_the_layout_shift_moves_the_fe_actuator_as_the_chain_lays_it():
@@ -498,12 +503,16 @@ def _standalone_result(um, status, load_factor, tip_deg, curve, ref):
     """A stand-in for ``solve_standalone``'s result (the stand-alone study only reads these fields)."""
     from types import SimpleNamespace
 
+    from workflow.fem.actuator import unit_bends_deg
+
+    g = um.geometry
     return SimpleNamespace(
         status=status,
         load_factor=load_factor,
         tip_angle_deg=tip_deg,
         backbone_mm=curve,
         backbone_ref_mm=ref,
+        unit_bends_deg=unit_bends_deg(curve, ref, len(um.chamber_group), g["depth"], g["gap"]),
         newton_iterations=5,
         wall_time_s=1.0,
         ndofs=int(um.mesh.p.size),
@@ -590,6 +599,10 @@ def test_standalone_exercises_solved_apart_merge_into_the_dataset_solved_togethe
     for name in together.data_vars:
         np.testing.assert_allclose(merged[name].values.astype(float), together[name].values.astype(float), err_msg=name)
     assert float(merged["tip_angle_diff_deg"].sel(exercise="TGE2")) != 0.0
+    # the units' groups and the jam angle belong to the actuator, not to an exercise
+    assert merged["unit_group"].dims == ("unit",) and list(merged["unit_group"].values) == ["CMC", "MCP", "PIP", "DIP"]
+    assert merged["jam_angle_deg"].dims == () and float(merged["jam_angle_deg"]) == pytest.approx(np.degrees(1 / 17.1))
+    assert np.ptp(merged["unit_bend_deg"].sel(exercise="TGE2", model="2d_plan").values) > 0  # the parabola's units
     with pytest.raises(ValueError, match="model"):
         FS.merge_exercises([parts[0], parts[1].isel(model=[0, 1])])
 

@@ -71,6 +71,26 @@ def test_unit_rotations_add_up_to_the_backbone_turn():
     assert rot.sum() == pytest.approx(direction(len(cols) - 2) - direction(0), rel=1e-9)
 
 
+@pytest.mark.parametrize("start", [0.0, 31.5])
+def test_a_kink_inside_a_unit_is_that_units_bend_alone(start):
+    """unit_bends_deg cuts the backbone at the gap centres from the first block's start (the actuator's place in the
+    finger model): a backbone straight but for one kink in the middle of chamber 2 puts the whole turn in unit 2."""
+    from workflow.fem.actuator import unit_bends_deg
+
+    depth, gap, n = 6.8, 1.0, 5
+    length = n * depth + (n - 1) * gap
+    s = start + np.linspace(0.0, length, 4 * n * 8 + 1)
+    kink = start + 2 * (depth + gap) + depth / 2
+    turn = np.radians(10.0)
+    ref = np.column_stack([s, np.zeros_like(s)])
+    after = s > kink
+    cur = ref.copy()
+    cur[after, 0] = kink + (s[after] - kink) * np.cos(turn)
+    cur[after, 1] = -(s[after] - kink) * np.sin(turn)  # clockwise = positive bend
+    bends = unit_bends_deg(cur, ref, n, depth, gap, start_mm=start)
+    np.testing.assert_allclose(bends, [0.0, 0.0, 10.0, 0.0, 0.0], atol=1e-9)
+
+
 def test_chain_check_favours_the_default_hold():
     """Middle unit of a chain of five (coarse) under end moments: the face hold's spring has its stiffness."""
     act = {"mesh": {"h_2d_mm": 2.0}}

@@ -214,3 +214,57 @@ def test_3d_unit_bends_the_same_way_and_less_than_2d():
     assert r3.status == 0
     # the side walls of the 3D chamber stiffen it against the 2D plane-strain section
     assert 0 < r3.bending_angle_deg < r2.bending_angle_deg
+
+
+# --------------------------------------------------------------------------
+# A unit inside a long actuator (docs/actuator.md, "A unit inside a long actuator")
+# --------------------------------------------------------------------------
+def _long_actuator(n, p_top_kpa, contact):
+    import yaml
+
+    from workflow.fem._mesh import build_actuator_mesh
+    from workflow.fem.actuator import solve_standalone
+    from workflow.settings import REPO_ROOT
+
+    act = yaml.safe_load((REPO_ROOT / "config" / "config.yaml").read_text())["actuator"]
+    um = build_actuator_mesh(act["geometry"], {"A": n}, h=2.0, dim=2, **fem.layer_options(act))
+    # the stand-alone actuator's restart band (fea_check.restarts), which the long chains need to pass the blocks'
+    # corners meeting
+    res = solve_standalone(
+        um,
+        {"A": (p_top_kpa, 0.0)},
+        material=act["material"],
+        contact=contact,
+        contact_options={"smoothing_mm": 0.1},
+        solver=dict(act["solver"], predictor=False, max_step=0.05, max_steps=800),
+    )
+    assert res.status == 0 and res.load_factor == 1.0
+    return res, act["geometry"]
+
+
+def test_interior_units_of_a_long_actuator_bend_alike_without_contact():
+    """Pressure in closed pockets loads the actuator with forces that balance in every pocket, so no section carries
+    a moment and, away from the clamp and the free end, every unit bends the same: a closed form the whole-actuator
+    model must meet before contact is switched on (seven units at 40 kPa: the middle three within 0.2 %)."""
+    res, _ = _long_actuator(7, 40.0, contact=False)
+    mid = res.unit_bends_deg[2:5]
+    assert mid.min() > 5.0 and np.ptp(mid) < 2e-3 * mid.mean()
+    d = np.diff(res.backbone_mm, axis=0)
+    first = -np.degrees(np.arctan2(d[0, 1], d[0, 0]))  # the clamp holds the end face, not the first element's far side
+    assert res.unit_bends_deg.sum() == pytest.approx(res.tip_angle_deg - first, abs=1e-9)
+
+
+def test_interior_units_jam_at_the_rigid_blocks_angle_with_contact():
+    """With contact the unpressurised blocks on the concave side meet at gap / (paper/2 + base + height) per unit
+    (3.35 deg, Table 6), and an interior unit of a long actuator bends little past it (nine units at 40 kPa in 2D:
+    4.1-4.7 deg in the three units after the clamp's, against 11.5 deg without contact; the free end's boundary layer
+    reaches back about five units), while the last unit, whose blocks splay outwards, bends more than twice as much:
+    the unit model of three chambers, two of them end units, overstates what a unit inside a long actuator does."""
+    from workflow.fem.actuator import jam_angle_deg
+
+    res, geom = _long_actuator(9, 40.0, contact=True)
+    jam = jam_angle_deg(geom)
+    assert jam == pytest.approx(np.degrees(1.0 / 17.1))
+    interior = res.unit_bends_deg[1:4]
+    assert np.all(interior > jam) and np.all(interior < 1.5 * jam)
+    assert res.unit_bends_deg[-1] > 2.0 * interior.mean()  # the free end's unit

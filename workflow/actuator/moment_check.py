@@ -37,7 +37,7 @@ import xarray as xr
 from workflow import fem
 from workflow.actuator.unit_model import UnitModel
 from workflow.common.constants import SOLVER_STATUS
-from workflow.fem.actuator import backbone_curve
+from workflow.fem.actuator import backbone_curve, unit_bends_deg
 
 __all__ = [
     "DEFAULT_CHECK",
@@ -114,21 +114,15 @@ def chain_mesh(unit, chain_units: int = 5, **layers):
 def unit_rotations_deg(um, u: np.ndarray) -> np.ndarray:
     """Backbone rotation of each unit (deg, positive = P_T sense) between the centres of its gaps.
 
-    The first and last units run from the chain's ends.  ``u``: nodal
-    displacements (mm) of the mesh ``um``.
+    The first and last units run from the chain's ends (:func:`workflow.fem.actuator.unit_bends_deg`).  ``u``:
+    nodal displacements (mm) of the mesh ``um``.
     """
     p = um.mesh.p
-    dim = um.dim
-    x = p + np.asarray(u)[: p.size].reshape(-1, dim).T
+    x = p + np.asarray(u)[: p.size].reshape(-1, um.dim).T
     g = um.geometry
     paper = np.flatnonzero(np.abs(p[1]) <= 0.5 * g["paper_width"] + 1e-9)
     cur, ref = backbone_curve(x, p, paper), backbone_curve(p, p, paper)
-    seg = -np.degrees(np.arctan2(np.diff(cur[:, 1]), np.diff(cur[:, 0])))
-    mid = 0.5 * (ref[1:, 0] + ref[:-1, 0])
-    pitch = g["depth"] + g["gap"]
-    n = int(g["n_chambers"])
-    stations = np.concatenate([[mid[0]], pitch * np.arange(1, n) - 0.5 * g["gap"], [mid[-1]]])
-    return np.diff(np.interp(stations, mid, seg))
+    return unit_bends_deg(cur, ref, int(g["n_chambers"]), g["depth"], g["gap"])
 
 
 def _solve(actuator, dim, mesh, pt, pb, case, **kw):

@@ -49,17 +49,19 @@ import logging
 import time
 import tracemalloc
 from dataclasses import dataclass, replace
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
+import xarray as xr
 
 from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.runlog import solved
 from workflow.fea_check.model import PatientFEA
 from workflow.fem import cumulative_attempts, first_converged
+from workflow.fem.actuator import jam_angle_deg
 from workflow.fem.coupled import CoupledResult, solve_coupled
 
-__all__ = ["ExerciseCheck", "outcome", "check_exercise", "gravity_state", "solve_with_restarts"]
+__all__ = ["ExerciseCheck", "outcome", "check_exercise", "gravity_state", "solve_with_restarts", "unit_bends_dataset"]
 
 log = logging.getLogger(__name__)
 
@@ -201,4 +203,33 @@ def check_exercise(
         max_strap_force_n=straps[0],
         peak_memory_mb=peak / 2**20,
         wall_time_s=time.perf_counter() - t0,
+    )
+
+
+def unit_bends_dataset(bends_deg: np.ndarray, *, groups: Sequence[str], geometry: Mapping) -> xr.Dataset:
+    """Each actuator unit's bend per exercise (``unit_bend_deg``, hand end first) beside the angle at which its
+    concave side's blocks would meet if rigid (``jam_angle_deg``, :func:`workflow.fem.actuator.jam_angle_deg`)."""
+    bends = np.asarray(bends_deg, float)
+    return xr.Dataset(
+        {
+            "unit_bend_deg": (
+                ("exercise", "unit"),
+                bends,
+                {
+                    "units": "degree",
+                    "long_name": "bend of each actuator unit (L_R, gap centre to gap centre), hand end first, flexion "
+                    "positive",
+                },
+            ),
+            "jam_angle_deg": (
+                (),
+                jam_angle_deg(geometry),
+                {
+                    "units": "degree",
+                    "long_name": "bend per unit at which neighbouring blocks on the concave side meet if rigid: "
+                    "gap / (paper/2 + base layer + block height)",
+                },
+            ),
+        },
+        coords={"unit": np.arange(bends.shape[-1]), "unit_group": ("unit", [str(g) for g in groups])},
     )

@@ -16,7 +16,7 @@ from workflow.cascade.model import solve_equilibrium
 from workflow.common.constants import CHAMBERS, CHECK_MAPPING_STATUS, GROUPS, JOINTS, SOLVER_STATUS
 from workflow.common.runlog import solved
 from workflow.fea_check.applied import pressures_2d
-from workflow.fea_check.check import ExerciseCheck, check_exercise, gravity_state, outcome
+from workflow.fea_check.check import ExerciseCheck, check_exercise, gravity_state, outcome, unit_bends_dataset
 from workflow.fea_check.correction import Correction, _corrections_dataset, correct_exercise
 from workflow.fea_check.model import PatientFEA
 from workflow.fem.coupled import CoupledResult
@@ -38,12 +38,14 @@ def fea_check_dataset(
     predicted_2d_deg: np.ndarray | None = None,
     corrections: Sequence[Correction] | None = None,
     notes: Mapping[str, Any] | None = None,
+    unit_geometry: Mapping[str, Any] | None = None,
 ) -> xr.Dataset:
     """``fea_check.nc`` content (without provenance) for the checked exercises.
 
     ``predicted_2d_deg`` (exercise, joint): the reduced-order chain with the
     2D unit at the applied pressures; ``corrections``: per exercise, the
-    correction step (adds the ``iteration`` dimension and ``corrected_*``).
+    correction step (adds the ``iteration`` dimension and ``corrected_*``);
+    ``unit_geometry`` ({"groups": group per unit, "geometry": the actuator's}) adds each unit's bend.
     """
     ex = [c.exercise for c in checks]
     tgt = plan["target_angle_deg"].sel(exercise=ex, joint=list(JOINTS)).values
@@ -236,6 +238,8 @@ def fea_check_dataset(
             "strap": ["PIP", "DIP"],
         },
     )
+    if unit_geometry is not None and checks:
+        ds = ds.merge(unit_bends_dataset(np.array([c.result.unit_bends_deg for c in checks]), **unit_geometry))
     if predicted_2d_deg is not None:
         p2d = np.asarray(predicted_2d_deg, float)
         ds["predicted_2d_angle_deg"] = (
@@ -385,5 +389,6 @@ def run_fea_check(
         predicted_2d_deg=np.array(pred_2d) if pred_2d else None,
         corrections=corrections if len(corrections) == len(checks) else None,
         notes={"model": fea.notes, **dict(notes or {})},
+        unit_geometry={"groups": list(fea.setup.cm.act.chamber_group), "geometry": fea.setup.cm.act.geometry},
     )
     return ds, checks, grav, corrections

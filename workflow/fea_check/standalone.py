@@ -31,7 +31,7 @@ from workflow import fem
 from workflow.common.constants import CHAMBERS, CHECK_MAPPING_STATUS, GROUPS, SOLVER_STATUS
 from workflow.common.runlog import solved
 from workflow.fem._mesh import build_actuator_mesh
-from workflow.fem.actuator import solve_standalone
+from workflow.fem.actuator import jam_angle_deg, solve_standalone
 
 __all__ = ["MODELS", "compare_models", "merge_exercises", "resample_backbone", "standalone_dataset"]
 
@@ -77,6 +77,7 @@ def standalone_dataset(
     bx = np.full(shape + (n_stations,), np.nan)
     by = np.full_like(bx, np.nan)
     tip, lam, wall = np.full(shape, np.nan), np.zeros(shape), np.zeros(shape)
+    bends = np.full(shape + (n,), np.nan)
     status = np.full(shape, -1, dtype="i1")
     its, ndofs = np.zeros(shape, dtype="i4"), np.zeros(shape, dtype="i4")
     h_used = np.full(shape, np.nan)
@@ -130,6 +131,7 @@ def standalone_dataset(
                     break
             bx[i, j], by[i, j] = resample_backbone(r.backbone_mm, r.backbone_ref_mm, stations)
             tip[i, j], lam[i, j], status[i, j] = r.tip_angle_deg, r.load_factor, r.status
+            bends[i, j] = r.unit_bends_deg
             its[i, j], wall[i, j], ndofs[i, j], h_used[i, j] = r.newton_iterations, t_case, r.ndofs, h
             attempt[i, j] = k
             pen[i, j], overlap[i, j], pocket[dim][i, j] = r.max_penetration_mm, r.overlap_depth_mm, r.min_pocket
@@ -151,6 +153,16 @@ def standalone_dataset(
                 ("exercise", "model"),
                 tip,
                 {"units": "degree", "long_name": "backbone rotation at the tip (positive towards the bottom side)"},
+            ),
+            "unit_bend_deg": (
+                ("exercise", "model", "unit"),
+                bends,
+                {"units": "degree", "long_name": "bend of each unit (gap centre to gap centre), hand end first"},
+            ),
+            "jam_angle_deg": (
+                (),
+                jam_angle_deg(geom),
+                {"units": "degree", "long_name": "bend per unit at which the concave side's blocks meet if rigid"},
             ),
             "converged": (
                 ("exercise", "model"),
@@ -240,6 +252,8 @@ def standalone_dataset(
             "exercise": list(exercises),
             "model": list(models),
             "station": stations,
+            "unit": np.arange(n),
+            "unit_group": ("unit", [g for g, k in upg.items() for _ in range(k)]),
             "group": list(GROUPS),
             "chamber": list(CHAMBERS),
         },
@@ -284,9 +298,10 @@ def merge_exercises(parts: Sequence[xr.Dataset]) -> xr.Dataset:
         raise ValueError("no stand-alone results to merge")
     first = parts[0]
     for part in parts[1:]:
-        for coord in ("model", "station", "group", "chamber"):
+        for coord in ("model", "station", "unit", "group", "chamber"):
             if not np.array_equal(part[coord].values, first[coord].values):
                 raise ValueError(f"stand-alone parts differ in {coord!r}: solved on different settings")
     stripped = [part.drop_vars([v for v in _COMPARISONS if v in part]) for part in parts]
-    ds = xr.concat(stripped, dim="exercise", combine_attrs="override")
+    # variables without an exercise (the units' groups, the jam angle) are the actuator's: kept once
+    ds = xr.concat(stripped, dim="exercise", data_vars="minimal", combine_attrs="override")
     return compare_models(ds)

@@ -40,6 +40,8 @@ __all__ = [
     "actuator_model",
     "backbone_curve",
     "tip_angle_deg",
+    "unit_bends_deg",
+    "jam_angle_deg",
     "StandaloneResult",
     "solve_standalone",
 ]
@@ -118,6 +120,38 @@ def tip_angle_deg(curve: np.ndarray) -> float:
     return float(-np.degrees(np.arctan2(d[1], d[0])))
 
 
+def unit_bends_deg(
+    curve: np.ndarray, curve_ref: np.ndarray, n_units: int, depth_mm: float, gap_mm: float, start_mm: float = 0.0
+) -> np.ndarray:
+    """Bend of each of the ``n_units`` units along a chain of chambers (n,), deg, positive as :func:`tip_angle_deg`.
+
+    Unit k (chamber k, from x = ``start_mm`` + k (depth + gap) at rest, and half of each gap beside it: the paper's
+    L_R) turns the backbone by the change of its inclination between the gap centres on either side, the chain's
+    ends for the end units; the inclination at a point is interpolated between the backbone segments' own. The
+    bends add up to the turn from the first segment to the last. ``curve``/``curve_ref``: :func:`backbone_curve`
+    deformed / at rest, mm.
+    """
+    d = np.diff(curve[:, :2], axis=0)
+    incl = -np.degrees(np.unwrap(np.arctan2(d[:, 1], d[:, 0])))
+    xm = 0.5 * (curve_ref[1:, 0] + curve_ref[:-1, 0])
+    pitch = float(depth_mm) + float(gap_mm)
+    inner = float(start_mm) + pitch * np.arange(1, int(n_units)) - 0.5 * float(gap_mm)
+    return np.diff(np.interp(np.concatenate([[xm[0]], inner, [xm[-1]]]), xm, incl))
+
+
+def jam_angle_deg(geometry: Mapping) -> float:
+    """Bend per unit at which neighbouring blocks on the concave side meet, if they were rigid, deg.
+
+    Two blocks turning about the paper layer close the gap between their outer corners by the relative rotation
+    times the corners' distance from the paper's mid-plane, paper/2 + base layer + block height: they meet at
+    gap / that distance (Table 6: 1 / 17.1 rad = 3.35 deg). Beyond it a unit bends only as far as the unpressurised
+    blocks squeeze, which the unit model of three chambers hides: two of its three units are end units, whose
+    blocks can splay outwards.
+    """
+    g = dict(geometry)
+    return float(np.degrees(g["gap"] / (0.5 * g["paper_width"] + g["bot_layer"] + g["height"])))
+
+
 @dataclass
 class StandaloneResult:
     """Stand-alone actuator at the given group pressures (kPa)."""
@@ -138,6 +172,7 @@ class StandaloneResult:
     min_pocket: float = np.nan  # smallest pocket over the path: area mm^2 (2D) / volume mm^3 (3D)
     displacement: np.ndarray | None = field(default=None, repr=False)
     tip_history: np.ndarray | None = field(default=None, repr=False)  # (steps, 2): load factor, tip angle (deg)
+    unit_bends_deg: np.ndarray | None = None  # (units,) each unit's bend at the last converged state, deg
 
 
 def solve_standalone(
@@ -194,4 +229,7 @@ def solve_standalone(
         min_pocket=min([h[pocket] for h in res.history], default=np.nan),
         displacement=res.u if keep_displacement else None,
         tip_history=np.array([[0.0, 0.0]] + [[h["lam"], h["tip_angle_deg"]] for h in res.history]),
+        unit_bends_deg=unit_bends_deg(
+            curve, backbone_curve(p_ref, p_ref, bb), len(um.chamber_group), um.geometry["depth"], um.geometry["gap"]
+        ),
     )

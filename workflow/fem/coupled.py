@@ -56,7 +56,7 @@ from workflow.fem._unit import (
     self_contact_pairs,
     solid_assembler,
 )
-from workflow.fem.actuator import backbone_curve, group_pressures, tip_angle_deg
+from workflow.fem.actuator import backbone_curve, group_pressures, tip_angle_deg, unit_bends_deg
 from workflow.fem.finger2d import (
     BONE,
     FLESH,
@@ -332,6 +332,7 @@ class CoupledResult:
     min_pocket_area_mm2: float = np.nan  # smallest pocket of the actuator over both phases
     # displacement (mm) of the actuator's hand end along the hand, distal positive: the rail travel the pose needs
     slide_mm: float = 0.0
+    unit_bends_deg: np.ndarray | None = None  # (units,) each actuator unit's bend, hand end first, deg
     history: list = field(default_factory=list)
     u: np.ndarray | None = field(default=None, repr=False)
     state: np.ndarray | None = field(default=None, repr=False)  # u and the enhanced parameters
@@ -447,6 +448,14 @@ def solve_coupled(
         min_pocket_area_mm2=pocket,
         tip_angle_deg=tip_angle_deg(curve),
         backbone_mm=curve,
+        unit_bends_deg=unit_bends_deg(
+            curve,
+            backbone_curve(p_ref, p_ref, cm.um.nodes["backbone"]),
+            len(cm.act.chamber_group),
+            cm.act.geometry["depth"],
+            cm.act.geometry["gap"],
+            start_mm=float(cm.offset[0]),
+        ),
         newton_iterations=iters,
         steps=steps,
         wall_time_s=time.perf_counter() - t0,
