@@ -9,7 +9,8 @@ without self-contact, beside the closed-form angle at which the concave side's b
 3D actuators stall where the blocks meet (``--dim 3``).
 
     OMP_NUM_THREADS=1 python benchmarks/study_long_actuator.py [--dim 2] [--h 2] [--units 3,13]
-        [--pressures 20:0,40:0,75:0,75:30] [--contact on,off] [--band 0.1]     -> benchmarks/out/long_actuator_{dim}d.csv
+        [--pressures 20:0,40:0,75:0,75:30] [--contact on,off] [--band 0.1] [--gap 1] [--height 15]
+                                                                         -> benchmarks/out/long_actuator_{dim}d[_gap.._height..].csv
 """
 
 from __future__ import annotations
@@ -42,9 +43,12 @@ def main(argv=None) -> pd.DataFrame:
     ap.add_argument("--contact", default="on,off")
     ap.add_argument("--band", type=float, default=0.1, help="contact band, mm (the stand-alone restart's)")
     ap.add_argument("--max-step", type=float, default=0.05, help="largest load step, without predictor")
+    ap.add_argument("--gap", type=float, default=None, help="gap between blocks, mm (Table 6: 1)")
+    ap.add_argument("--height", type=float, default=None, help="block height, mm (Table 6: 15)")
     args = ap.parse_args(argv)
     act = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["actuator"]
     geom = {**fem.DEFAULT_GEOMETRY, **act["geometry"]}
+    geom.update({k: v for k, v in (("gap", args.gap), ("height", args.height)) if v is not None})
     solver = dict(act["solver"], predictor=False, max_step=args.max_step, max_steps=3000)
     jam = jam_angle_deg(geom)
     print(f"rigid blocks meet on the concave side at {jam:.3f} deg per unit", flush=True)
@@ -74,6 +78,8 @@ def main(argv=None) -> pd.DataFrame:
                     rows.append(
                         {
                             "dim": args.dim,
+                            "gap_mm": geom["gap"],
+                            "height_mm": geom["height"],
                             "h_mm": args.h,
                             "p_top_kpa": pt,
                             "p_bottom_kpa": pb,
@@ -89,7 +95,8 @@ def main(argv=None) -> pd.DataFrame:
                     )
     df = pd.DataFrame(rows)
     OUT.mkdir(exist_ok=True)
-    out = OUT / f"long_actuator_{args.dim}d.csv"
+    tag = "".join(f"_{k}{v:g}" for k, v in (("gap", args.gap), ("height", args.height)) if v is not None)
+    out = OUT / f"long_actuator_{args.dim}d{tag}.csv"
     df.to_csv(out, index=False)
     print(f"-> {out.relative_to(ROOT)}")
     return df
