@@ -45,7 +45,13 @@ def main(argv=None) -> pd.DataFrame:
     ap.add_argument("--max-step", type=float, default=0.05, help="largest load step, without predictor")
     ap.add_argument("--gap", type=float, default=None, help="gap between blocks, mm (Table 6: 1)")
     ap.add_argument("--height", type=float, default=None, help="block height, mm (Table 6: 15)")
+    ap.add_argument("--plot", default=None, help="also draw the bends per unit to this .png (e.g. docs/img/...)")
+    ap.add_argument("--from-csv", default=None, help="draw from this earlier output instead of solving")
     args = ap.parse_args(argv)
+    if args.from_csv:
+        df = pd.read_csv(args.from_csv)
+        plot(df, args.plot or str(Path(args.from_csv).with_suffix(".png")))
+        return df
     act = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["actuator"]
     geom = {**fem.DEFAULT_GEOMETRY, **act["geometry"]}
     geom.update({k: v for k, v in (("gap", args.gap), ("height", args.height)) if v is not None})
@@ -99,7 +105,41 @@ def main(argv=None) -> pd.DataFrame:
     out = OUT / f"long_actuator_{args.dim}d{tag}.csv"
     df.to_csv(out, index=False)
     print(f"-> {out.relative_to(ROOT)}")
+    if args.plot:
+        plot(df, args.plot)
     return df
+
+
+def plot(df: pd.DataFrame, out: str) -> None:
+    """One panel per pressure pair: bend per unit along each actuator, with and without contact, and the jam angle."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pairs = df[["p_top_kpa", "p_bottom_kpa"]].drop_duplicates().values
+    fig, axes = plt.subplots(1, len(pairs), figsize=(3.3 * len(pairs), 3.2), sharey=True, squeeze=False)
+    for ax, (pt, pb) in zip(axes[0], pairs):
+        sub = df[(df.p_top_kpa == pt) & (df.p_bottom_kpa == pb)]
+        for (contact, n), g in sub.groupby(["contact", "n_units"]):
+            style = "-" if contact == "on" else ":"
+            colour = "tab:red" if n <= 3 else "tab:blue"
+            label = f"{n} units, contact {contact}" + (" (the unit model)" if n == 3 and contact == "on" else "")
+            ax.plot(g["unit"] + 1, g["bend_deg"], style, marker=".", color=colour, lw=1.0, label=label)
+        jam = float(sub["jam_angle_deg"].iloc[0])
+        ax.axhline(jam, color="k", ls="--", lw=0.7)
+        ax.text(13, jam, f"rigid blocks meet: {jam:.2f} deg", fontsize=6, va="top", ha="right")
+        ax.set_title(f"P_T = {pt:g}, P_B = {pb:g} kPa", fontsize=8)
+        ax.set_xlabel("unit, from the clamped end", fontsize=7)
+        ax.tick_params(labelsize=6)
+    axes[0, 0].set_ylabel("bend per unit (deg)", fontsize=7)
+    axes[0, 0].legend(fontsize=5.5)
+    d, h = int(df["dim"].iloc[0]), float(df["h_mm"].iloc[0])
+    fig.suptitle(f"A unit inside a long actuator ({d}D, h = {h:g} mm, stand-alone, no load)", fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    fig.savefig(out, dpi=130)
+    plt.close(fig)
+    print(f"-> {out}")
 
 
 if __name__ == "__main__":

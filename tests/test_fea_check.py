@@ -603,6 +603,10 @@ def test_standalone_exercises_solved_apart_merge_into_the_dataset_solved_togethe
     assert merged["unit_group"].dims == ("unit",) and list(merged["unit_group"].values) == ["CMC", "MCP", "PIP", "DIP"]
     assert merged["jam_angle_deg"].dims == () and float(merged["jam_angle_deg"]) == pytest.approx(np.degrees(1 / 17.1))
     assert np.ptp(merged["unit_bend_deg"].sel(exercise="TGE2", model="2d_plan").values) > 0  # the parabola's units
+    from workflow.fea_check.plots import plot_standalone
+
+    plot_standalone(merged, tmp_path / "standalone.png")  # curves above, bends per unit below
+    assert (tmp_path / "standalone.png").stat().st_size > 0
     with pytest.raises(ValueError, match="model"):
         FS.merge_exercises([parts[0], parts[1].isel(model=[0, 1])])
 

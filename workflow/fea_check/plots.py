@@ -139,8 +139,11 @@ def plot_fea_poses(
 def plot_standalone(ds: xr.Dataset, out: str | Path, title: str = "") -> None:
     """Backbone curves of the stand-alone actuators per exercise and model (Fig. 22-like)."""
     ex = ds["exercise"].values
-    fig, axes = plt.subplots(1, len(ex), figsize=(3.4 * len(ex), 3.4), squeeze=False)
+    bends = "unit_bend_deg" in ds
+    fig, axes = plt.subplots(2 if bends else 1, len(ex), figsize=(3.4 * len(ex), 6.2 if bends else 3.4), squeeze=False)
     styles = {"2d_mapped": ("tab:blue", "-"), "2d_plan": ("tab:blue", ":"), "3d_plan": ("tab:red", "-")}
+    if bends:
+        _unit_bend_row(axes[1], ds, styles)
     for ax, e in zip(axes[0], ex):
         for m in ds["model"].values:
             row = ds.sel(exercise=e, model=m)
@@ -161,11 +164,47 @@ def plot_standalone(ds: xr.Dataset, out: str | Path, title: str = "") -> None:
         ax.tick_params(labelsize=6)
         ax.set_xlabel("x (mm)", fontsize=7)
     axes[0, 0].set_ylabel("y (mm)", fontsize=7)
-    fig.suptitle(f"Stand-alone actuators, backbone curves{': ' + title if title else ''}", fontsize=8)
+    fig.suptitle(
+        f"Stand-alone actuators, backbone curves{' and bend per unit' if bends else ''}{': ' + title if title else ''}",
+        fontsize=8,
+    )
     fig.tight_layout(rect=(0, 0, 1, 0.93))
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=130)
     plt.close(fig)
+
+
+def _unit_bend_row(axes, ds: xr.Dataset, styles: dict) -> None:
+    """Each unit's bend along the actuator per exercise and model, against the concave side's jam angle."""
+    groups = ds["unit_group"].values
+    unit = ds["unit"].values
+    edges = [k - 0.5 for k in range(1, len(groups)) if groups[k] != groups[k - 1]]
+    for ax, e in zip(axes, ds["exercise"].values):
+        for m in ds["model"].values:
+            b = ds["unit_bend_deg"].sel(exercise=e, model=m).values
+            if np.any(np.isfinite(b)):
+                c, ls = styles.get(str(m), ("k", "-"))
+                ax.plot(unit, b, ls, color=c, marker=".", ms=3, lw=1.0, label=str(m))
+        jam = float(ds["jam_angle_deg"])
+        for sign in (1, -1):
+            ax.axhline(sign * jam, color="k", ls="--", lw=0.7)
+        ax.text(unit[0], jam, f"blocks meet ({jam:.2f} deg)", fontsize=5.5, va="bottom", ha="left")
+        for x in edges:
+            ax.axvline(x, color="0.7", lw=0.6)
+        for g in dict.fromkeys(groups):
+            ax.text(
+                np.mean(unit[groups == g]),
+                1.0,
+                str(g),
+                transform=ax.get_xaxis_transform(),
+                fontsize=6,
+                ha="center",
+                va="bottom",
+            )
+        ax.set_xlabel("unit, from the hand end", fontsize=7)
+        ax.tick_params(labelsize=6)
+    axes[0].set_ylabel("bend per unit (deg)", fontsize=7)
+    axes[0].legend(fontsize=6)
 
 
 def plot_chain_calibration(ds: xr.Dataset, out: str | Path) -> None:
