@@ -218,7 +218,7 @@ def unit_bends_dataset(bends_deg: np.ndarray, *, groups: Sequence[str], geometry
                 {
                     "units": "degree",
                     "long_name": "bend of each actuator unit (L_R, gap centre to gap centre), hand end first, flexion "
-                    "positive",
+                    "positive, at the plan's own pressures (before any correction step)",
                 },
             ),
             "jam_angle_deg": (
