@@ -715,6 +715,7 @@ def test_an_exercise_ramps_from_the_gravity_state_with_the_contact_band_that_sta
             gravity_moments=np.zeros(3),
             max_strap_force={},
             joint_angles_deg=np.zeros(3),
+            unit_bends_deg=None,
         )
 
     monkeypatch.setattr(FC, "solve_coupled", fake_solve)

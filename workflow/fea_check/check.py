@@ -183,6 +183,8 @@ def check_exercise(
     )
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
+    if res.unit_bends_deg is not None:
+        log.info("%s: %s", name, _unit_bend_summary(res.unit_bends_deg, fea.setup.cm.act))
     W = fea.width_mm
     hist = [h for h in res.history if h.get("phase") == "pressure"] or res.history
     act = (
@@ -233,3 +235,12 @@ def unit_bends_dataset(bends_deg: np.ndarray, *, groups: Sequence[str], geometry
         },
         coords={"unit": np.arange(bends.shape[-1]), "unit_group": ("unit", [str(g) for g in groups])},
     )
+
+
+def _unit_bend_summary(bends_deg: np.ndarray, act) -> str:
+    """Each group's range of unit bends against the jam angle, for the log (deg)."""
+    groups = np.asarray(act.chamber_group)
+    parts = [
+        f"{g} {bends_deg[groups == g].min():.1f}-{bends_deg[groups == g].max():.1f}" for g in dict.fromkeys(groups)
+    ]
+    return f"units bend {', '.join(parts)} deg (concave side's blocks meet at {jam_angle_deg(act.geometry):.2f} deg)"
