@@ -208,19 +208,22 @@ def check_exercise(
     )
 
 
-def unit_bends_dataset(bends_deg: np.ndarray, *, groups: Sequence[str], geometry: Mapping) -> xr.Dataset:
-    """Each actuator unit's bend per exercise (``unit_bend_deg``, hand end first) beside the angle at which its
-    concave side's blocks would meet if rigid (``jam_angle_deg``, :func:`workflow.fem.actuator.jam_angle_deg`)."""
+def unit_bends_dataset(
+    bends_deg: np.ndarray, *, groups: Sequence[str], geometry: Mapping, dims: Sequence[str] = ("exercise",)
+) -> xr.Dataset:
+    """Each actuator unit's bend (``unit_bend_deg``, ``dims`` then ``unit``, hand end first) beside the angle at which
+    its concave side's blocks would meet if rigid (``jam_angle_deg``, :func:`workflow.fem.actuator.jam_angle_deg`);
+    the FEA check's (per exercise) and the stand-alone actuators' (per exercise and model)."""
     bends = np.asarray(bends_deg, float)
     return xr.Dataset(
         {
             "unit_bend_deg": (
-                ("exercise", "unit"),
+                (*dims, "unit"),
                 bends,
                 {
                     "units": "degree",
                     "long_name": "bend of each actuator unit (L_R, gap centre to gap centre), hand end first, flexion "
-                    "positive, at the plan's own pressures (before any correction step)",
+                    "positive (the FEA check: at the plan's own pressures, before any correction step)",
                 },
             ),
             "jam_angle_deg": (

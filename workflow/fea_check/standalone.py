@@ -30,8 +30,9 @@ import xarray as xr
 from workflow import fem
 from workflow.common.constants import CHAMBERS, CHECK_MAPPING_STATUS, GROUPS, SOLVER_STATUS
 from workflow.common.runlog import solved
+from workflow.fea_check.check import unit_bends_dataset
 from workflow.fem._mesh import build_actuator_mesh
-from workflow.fem.actuator import jam_angle_deg, solve_standalone
+from workflow.fem.actuator import solve_standalone
 
 __all__ = ["MODELS", "compare_models", "merge_exercises", "resample_backbone", "standalone_dataset"]
 
@@ -154,16 +155,6 @@ def standalone_dataset(
                 tip,
                 {"units": "degree", "long_name": "backbone rotation at the tip (positive towards the bottom side)"},
             ),
-            "unit_bend_deg": (
-                ("exercise", "model", "unit"),
-                bends,
-                {"units": "degree", "long_name": "bend of each unit (gap centre to gap centre), hand end first"},
-            ),
-            "jam_angle_deg": (
-                (),
-                jam_angle_deg(geom),
-                {"units": "degree", "long_name": "bend per unit at which the concave side's blocks meet if rigid"},
-            ),
             "converged": (
                 ("exercise", "model"),
                 (status == 0) & (lam >= 1 - 1e-9),
@@ -252,12 +243,12 @@ def standalone_dataset(
             "exercise": list(exercises),
             "model": list(models),
             "station": stations,
-            "unit": np.arange(n),
-            "unit_group": ("unit", [g for g, k in upg.items() for _ in range(k)]),
             "group": list(GROUPS),
             "chamber": list(CHAMBERS),
         },
     )
+    groups = [g for g, k in upg.items() for _ in range(k)]
+    ds = ds.merge(unit_bends_dataset(bends, groups=groups, geometry=geom, dims=("exercise", "model")))
     ds["station"].attrs = {"units": "mm", "long_name": "position along the undeformed backbone from the hand end"}
     ds.attrs.update({"h_2d_mm": float(h_2d_mm), "h_3d_mm_tried": str(h3_list), "units_per_group": str(upg)})
     return compare_models(ds)
