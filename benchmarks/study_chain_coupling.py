@@ -25,6 +25,7 @@ table ("Calibrating the chain to the FEA").
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 from workflow.actuator.unit_model import load_unit_model  # noqa: E402
 from workflow.cascade import model as cm  # noqa: E402
 from workflow.cascade.calibration import calibrated  # noqa: E402
-from workflow.cascade.patient import patient_cascade, patient_finger  # noqa: E402
+from workflow.cascade.patient import jam_model, patient_cascade, patient_finger  # noqa: E402
 from workflow.common.provenance import open_result  # noqa: E402
 
 RES = ROOT / "results"
@@ -48,6 +49,10 @@ START = {
     "full": np.r_[np.eye(3).ravel(), np.zeros(3)],
     "asym": np.r_[np.ones(6), np.zeros(3)],
     "diag+offset": np.r_[np.ones(3), np.zeros(6)],
+    # the units inside the actuator capped at their jam angle (workflow.actuator.jam, the config's slope and decay)
+    "jam": np.zeros(0),  # nothing fitted: the paper's chain with the jam
+    "jam+give": np.zeros(3),  # the gives fitted
+    "jam+diag": np.r_[np.ones(3), np.zeros(3)],  # the rule's gains and gives on top of the jam
 }
 
 
@@ -68,6 +73,12 @@ def _chain(ds: xr.Dataset):
 
 def _bounds(kind: str) -> tuple[np.ndarray, np.ndarray]:
     gain, give, off, offset = (0.1, 1.5), (-20.0, 20.0), (-1.5, 1.5), (-30.0, 30.0)
+    if kind.startswith("jam"):
+        kind = {"jam": "none", "jam+give": "give", "jam+diag": "diag"}[kind]
+        if kind == "none":
+            return np.zeros(0), np.zeros(0)
+        if kind == "give":
+            return np.full(3, give[0]), np.full(3, give[1])
     if kind == "full":
         g = [gain if i == j else off for i in range(3) for j in range(3)]
         parts = g + [give] * 3
@@ -79,7 +90,11 @@ def _bounds(kind: str) -> tuple[np.ndarray, np.ndarray]:
 
 def _unpack(x: np.ndarray, kind: str):
     """(coupling, give c rad/N m (3,), offset b deg (3,)); coupling is a matrix or (flexing, extending) gains."""
-    if kind == "diag":
+    if kind == "jam":
+        return np.eye(3), np.zeros(3), np.zeros(3)
+    if kind == "jam+give":
+        return np.eye(3), x[:3], np.zeros(3)
+    if kind in ("diag", "jam+diag"):
         return np.diag(x[:3]), x[3:6], np.zeros(3)
     if kind == "full":
         return x[:9].reshape(3, 3), x[9:12], np.zeros(3)
@@ -97,12 +112,15 @@ class Study:
         self.fit = ds.role.values == "fit"
         self.sets = ds.set_name.values
         self.bare = calibrated(self.chain, np.ones(3), np.zeros(3))  # gain 1, no give beyond the straps'
+        cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["cascade"]
+        cfg["jam"] = dict(cfg["jam"], use=True)
+        self.bare_jam = replace(self.bare, jam=jam_model(cfg))
         self.c_strap = cm._strap_compliance(self.chain)
 
-    def span_bends(self, p8: np.ndarray, m: np.ndarray) -> np.ndarray:
+    def span_bends(self, p8: np.ndarray, m: np.ndarray, jam: bool = False) -> np.ndarray:
         """S (3,) deg: each span's units' bends under the span moments ``m`` (N m), summed: the chain's own span bend
         with gain 1, the straps' give added back (the couplings here apply their gains and gives to S)."""
-        return cm._span_angles_deg(self.bare, p8, m)[1] + np.rad2deg(self.c_strap * m)
+        return cm._span_angles_deg(self.bare_jam if jam else self.bare, p8, m)[1] + np.rad2deg(self.c_strap * m)
 
     def angles(self, x: np.ndarray, kind: str, rows: np.ndarray) -> np.ndarray:
         G, c, b = _unpack(x, kind)
@@ -111,7 +129,7 @@ class Study:
 
             def res(t, p8=self.P[i]):
                 m = cm._required_moments(self.chain, t)[0]
-                S = self.span_bends(p8, m)
+                S = self.span_bends(p8, m, jam=kind.startswith("jam"))
                 th = G[0] * np.maximum(S, 0) + G[1] * np.minimum(S, 0) if isinstance(G, tuple) else G @ S
                 return th - np.rad2deg((self.c_strap + c) * m) + b - t
 
@@ -127,17 +145,19 @@ class Study:
             e = self.angles(x, kind, self.fit) - self.A[self.fit]
             return np.where(np.isfinite(e), e, FAILED_DEG).ravel()
 
-        sol = least_squares(resid, START[kind], bounds=_bounds(kind))
-        ef = self.angles(sol.x, kind, self.fit) - self.A[self.fit]
+        x = START[kind]
+        if x.size:
+            x = least_squares(resid, x, bounds=_bounds(kind)).x
+        ef = self.angles(x, kind, self.fit) - self.A[self.fit]
         held = ~self.fit
-        eh = self.angles(sol.x, kind, held) - self.A[held]
+        eh = self.angles(x, kind, held) - self.A[held]
         per = {
             s: np.round(np.nanmax(np.abs(eh[self.sets[held] == s]), axis=0), 1).tolist()
             for s in np.unique(self.sets[held])
         }
         return {
             "coupling": kind,
-            "parameters": np.round(sol.x, 3).tolist(),
+            "parameters": np.round(x, 3).tolist(),
             "fit_rms_deg": float(np.sqrt(np.nanmean(ef**2))),
             "fit_max_deg": float(np.nanmax(np.abs(ef))),
             "held_out_rms_deg": float(np.sqrt(np.nanmean(eh**2))),

@@ -514,3 +514,46 @@ def test_dummy_finger_is_solid_pla_with_the_same_springs(config):
     assert d["pla"] / d["flesh_proximal"] < dummy.masses_kg[0] / human.masses_kg[0] < d["pla"] / d["bone"]
     for a in (30.0, 90.0):
         assert [s.moment_nm(a) for s in dummy.springs] == [s.moment_nm(a) for s in human.springs]
+
+
+def test_jam_caps_an_interior_units_bend_smoothly_and_oddly():
+    from workflow.actuator.jam import JamModel, capped_bend_deg, free_end_weights
+
+    jam = JamModel.from_geometry(ACTUATOR)
+    assert jam.jam_deg == pytest.approx(np.degrees(1.0 / 17.1))  # gap / (paper/2 + base + block height)
+    th = np.linspace(-30.0, 30.0, 6001)
+    c = capped_bend_deg(th, jam.jam_deg, 0.1)
+    np.testing.assert_allclose(c, -capped_bend_deg(-th, jam.jam_deg, 0.1), atol=1e-12)  # extension mirrors flexion
+    assert np.all(np.diff(c) > 0)  # monotone: the plans' inverse stays unique
+    far = np.abs(th) > jam.jam_deg + 3.0
+    np.testing.assert_allclose(c[far], np.sign(th[far]) * (jam.jam_deg + 0.1 * (np.abs(th[far]) - jam.jam_deg)))
+    below = np.abs(th) < jam.jam_deg - 2.0
+    np.testing.assert_allclose(c[below], th[below], atol=1e-3)
+    w = free_end_weights(6, 2.0)
+    np.testing.assert_allclose(w, np.exp(-np.array([4, 3, 2, 1, 0, 0]) / 2.0))
+    assert np.all(free_end_weights(6, 0.0) == 0.0)
+    with pytest.raises(ValueError, match="slope"):
+        JamModel(3.35, slope=1.5)
+
+
+def test_chain_with_the_jam_bends_less_and_plans_agree_with_it():
+    # every unit of the chain capped at the jam: the same pressures flex the finger less; each span's bend in the
+    # paper rule's plan is the jam-capped units' (the planner and the chain use one unit response)
+    from workflow.actuator.jam import JamModel
+
+    jam = JamModel.from_geometry(ACTUATOR)
+    free, capped = model(), model(jam=jam)
+    p = np.array([250, 0, 250, 0, 200, 0, 200, 0], float)
+    assert np.all(C.solve_equilibrium(capped, p).joint_angles_deg < C.solve_equilibrium(free, p).joint_angles_deg)
+    # a group's mean bend: the interior cap for the CMC group, far from the free end; the unit model's at the tip
+    share = capped.group_end_share()
+    assert share[0] < 1e-3 and share[3] > 0.5
+    th = LinearUnit().free_angle_deg(250.0, 0.0)
+    assert C.group_bends_deg(capped, 0, 250.0, 0.0, 0.0) == pytest.approx(jam.bend_deg(th, share[0]))
+    target = C.solve_equilibrium(capped, np.array([150, 0, 150, 0, 100, 0, 60, 0], float)).joint_angles_deg
+    plan = planning.plan_exercise(capped, target, tol_deg=5.0, active_limits_nm=LIMITS, planner="paper")
+    assert plan.achieved, plan.reason
+    assert np.max(np.abs(plan.equilibrium.joint_angles_deg - target)) <= 5.0
+    # the whole actuator drawn free: the free end's units bend more than the interior's at one pressure
+    th_units, _ = kinematics.free_shape(capped, [250, 0] * 4)
+    assert th_units[-1] == pytest.approx(th) and th_units[-1] > 1.9 * th_units[capped.n_units // 2]

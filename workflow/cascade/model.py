@@ -25,6 +25,9 @@ static equilibrium that can be solved for any pressures:
   line: 8.43 and 5.67 mm for the mean finger, the paper's dummy-finger arms):
   strap force ``m_X / a_X`` and give ``m_X / (k a_X^2)`` of extra span rotation.
   The MCP span is held by the sliding support at the hand end (no give).
+* **Jam** (optional, :mod:`workflow.actuator.jam`): a unit inside the actuator bends as the unit model only up to
+  the angle where its unpressurised blocks meet their neighbours', little past it, and as the unit model again near
+  the free end; the chain then uses each group's mean bend (:func:`group_bends_deg`).
 * **Calibration** (optional, :mod:`workflow.cascade.calibration`): a joint turns by ``g_X`` times its span's
   units' bend less ``c_X m_X`` beyond the straps' give; ``g = 1``, ``c = 0`` is the paper's chain.
 * **Equilibrium** of the finger+actuator section at each joint:
@@ -57,6 +60,7 @@ from typing import Any, Mapping, Protocol, Sequence
 import numpy as np
 from scipy.optimize import root
 
+from workflow.actuator.jam import free_end_weights
 from workflow.cascade.finger import Finger, gravity_moments_nm
 from workflow.common.constants import GROUPS, JOINTS, PRESSURE_NAMES
 
@@ -71,6 +75,7 @@ __all__ = [
     "actuator_gravity_moments_nm",
     "Equilibrium",
     "solve_equilibrium",
+    "group_bends_deg",
     "pressures_vector",
     "pressures_table",
 ]
@@ -162,10 +167,21 @@ class CascadeModel:
     #: :mod:`workflow.cascade.calibration`
     span_gain: np.ndarray = field(default_factory=lambda: np.ones(3))
     span_compliance_rad_per_nm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    #: a unit inside the actuator (:class:`workflow.actuator.jam.JamModel`); None: every unit bends as the unit model
+    jam: Any = None
 
     @property
     def n_units(self) -> int:
         return int(self.unit_group.size)
+
+    def end_weights(self) -> np.ndarray:
+        """(N,) each unit's free-end weight of the jam model (0 without one)."""
+        return np.zeros(self.n_units) if self.jam is None else free_end_weights(self.n_units, self.jam.decay_units)
+
+    def group_end_share(self) -> np.ndarray:
+        """(4,) the mean free-end weight of each group's units."""
+        w = self.end_weights()
+        return np.array([w[self.unit_group == g].mean() if np.any(self.unit_group == g) else 0.0 for g in range(4)])
 
     def span_counts(self) -> np.ndarray:
         """(joint, group) number of units of each group in each joint's span."""
@@ -198,6 +214,7 @@ def build_cascade(
     gravity_m_s2: float | None = None,
     actuator_weight: bool = True,
     layout_shift_mm: float = 0.0,
+    jam: Any = None,
 ) -> CascadeModel:
     """Lay the actuator on the straight finger (see the module docstring).
 
@@ -209,7 +226,8 @@ def build_cascade(
     defaults to the finger's.  ``actuator_weight=False`` makes the actuator
     massless.  ``layout_shift_mm`` moves the whole actuator along the finger
     (mm, distal positive) from where the CMC group ends at the MCP joint; the
-    spans stay group-wise (the MCP joint turns with the CMC and MCP groups).
+    spans stay group-wise (the MCP joint turns with the CMC and MCP groups).  ``jam``: a
+    :class:`workflow.actuator.jam.JamModel` for the units inside the actuator (None: the unit model throughout).
     """
     sec = unit_section(actuator_dims_mm)
     lr = sec["unit_length_mm"] * 1e-3
@@ -245,6 +263,7 @@ def build_cascade(
         strap_arm_m=np.array([np.nan, arms[1], arms[2]]),
         gravity_m_s2=finger.gravity_m_s2 if gravity_m_s2 is None else float(gravity_m_s2),
         n_per_group=counts,
+        jam=jam,
     )
 
 
@@ -298,6 +317,8 @@ def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> t
     pg = np.repeat(pt, 3, axis=0)  # (12, 2): group-major
     mm = np.tile(np.asarray(m_nm, float), 4)
     th = np.asarray(model.unit.angle_deg(pg[:, 0], pg[:, 1], mm), float).reshape(4, 3)  # (group, joint)
+    if model.jam is not None:
+        th = model.jam.bend_deg(th, model.group_end_share()[:, None])
     counts = model.span_counts()  # (joint, group)
     # the joint lags the units by the span's give: a strap stretched by the moment the actuator drives the finger with
     span = np.asarray(model.span_gain, float) * np.sum(counts * th.T, axis=1) - np.rad2deg(
@@ -305,6 +326,13 @@ def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> t
     )
     unit_g = np.array([th[g, [j for j, jn in enumerate(JOINTS) if GROUPS[g] in SPANS[jn]][0]] for g in range(4)])
     return unit_g, span
+
+
+def group_bends_deg(model: CascadeModel, group: int, p_top_kpa, p_bottom_kpa, m_nm) -> np.ndarray:
+    """Mean bend (deg) of group ``group``'s units at these pressures (kPa) under the span moment ``m_nm`` (N m):
+    the unit model's, or with a jam model its interior and free-end bends averaged over the group (broadcast)."""
+    th = np.asarray(model.unit.angle_deg(p_top_kpa, p_bottom_kpa, m_nm), float)
+    return th if model.jam is None else model.jam.bend_deg(th, model.group_end_share()[group])
 
 
 def _required_moments(

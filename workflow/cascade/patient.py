@@ -9,6 +9,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from workflow.actuator.jam import JamModel
 from workflow.actuator.pressure_limit import PressureLimit, smallest
 from workflow.cascade import finger as F
 from workflow.cascade.finger import Finger
@@ -104,6 +105,17 @@ def patient_cascade(
         units_per_group=units_per_group or c.get("units_per_group") or None,
         layout_shift_mm=float(c.get("layout_shift_mm", 0.0)),
         strap_stiffness_n_per_m=c["strap_stiffness_n_per_m"],
+        jam=jam_model(c),
+    )
+
+
+def jam_model(cascade_cfg: Mapping[str, Any]) -> JamModel | None:
+    """The config's ``cascade.jam`` as a :class:`JamModel` on the unit's Table 6 geometry, or None where it is off."""
+    j = cascade_cfg.get("jam") or {}
+    if not j.get("use", False):
+        return None
+    return JamModel.from_geometry(
+        cascade_cfg["unit_geometry_mm"], slope=float(j["slope"]), decay_units=float(j["free_end_decay_units"])
     )
 
 

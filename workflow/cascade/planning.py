@@ -40,6 +40,7 @@ from workflow.cascade.model import (
     _required_moments,
     _span_angles_deg,
     _span_compliance,
+    group_bends_deg,
     solve_equilibrium,
 )
 from workflow.cascade.stiffness import load_stiffness_nm_per_deg, span_stiffness_nm_per_deg
@@ -100,7 +101,7 @@ def _span_setup(model, joint: int, m_req: float, target: float, tie: bool):
         out = np.full(P.shape[0], -give - target)
         for g in range(4):
             if counts[g]:
-                th = model.unit.angle_deg(p8[:, 2 * g], p8[:, 2 * g + 1], np.full(P.shape[0], m_req))
+                th = group_bends_deg(model, g, p8[:, 2 * g], p8[:, 2 * g + 1], np.full(P.shape[0], m_req))
                 out += gain * counts[g] * np.asarray(th, float)
         return out
 
@@ -200,25 +201,29 @@ def _span_plan_paper(
         raise ValueError(f"the {JOINTS[joint]} span has no units: nothing to plan")
     give = np.rad2deg(_span_compliance(model)[joint] * m_req)
     theta_u = (target + give) / (float(model.span_gain[joint]) * n_units)
-    unit = model.unit
+    counts = model.span_counts()[joint]
+
+    def unit_bend(pt, pb, m):  # the mean bend of the span's units, all at the same pressures
+        return sum(counts[g] * group_bends_deg(model, g, pt, pb, m) for g in range(4) if counts[g]) / n_units
+
     x = np.linspace(0.0, p_max, n)
     at_max = np.full(n, p_max)
     # (a) the free angle's point on the limit's top-pressure curve
     if theta_u >= 0:
-        pt, (pb, _) = p_max, _nearest_zero(np.asarray(unit.free_angle_deg(at_max, x), float) - theta_u, x, p_max)
+        pt, (pb, _) = p_max, _nearest_zero(np.asarray(unit_bend(at_max, x, 0.0), float) - theta_u, x, p_max)
     else:
-        (pt, _), pb = _nearest_zero(np.asarray(unit.free_angle_deg(x, at_max), float) - theta_u, x, p_max), p_max
+        (pt, _), pb = _nearest_zero(np.asarray(unit_bend(x, at_max, 0.0), float) - theta_u, x, p_max), p_max
     # (b) the moment: the top moves, the bottom held; else the bottom moves, the top held; else the closest of both
 
     def pair_of(p):
         return np.tile(np.asarray(p, float), len(idx) // 2)[None, :]
 
     m = np.full(n, m_req)
-    t, ok_t = _nearest_zero(np.asarray(unit.angle_deg(x, np.full(n, pb), m), float) - theta_u, x, pt)
+    t, ok_t = _nearest_zero(np.asarray(unit_bend(x, np.full(n, pb), m), float) - theta_u, x, pt)
     if ok_t:
         pt_pb = (t, pb)
     else:
-        b, ok_b = _nearest_zero(np.asarray(unit.angle_deg(np.full(n, pt), x, m), float) - theta_u, x, pb)
+        b, ok_b = _nearest_zero(np.asarray(unit_bend(np.full(n, pt), x, m), float) - theta_u, x, pb)
         cands = [(pt, b)] if ok_b else [(pt, pb), (t, pb), (pt, b)]
         pt_pb = min(cands, key=lambda c: abs(float(bend(pair_of(c))[0])))
     P = pair_of(pt_pb)
