@@ -97,6 +97,12 @@ def write_cascade_plan(
     if calibration_nc is not None:
         gain, compliance, chain_note = read_calibration(calibration_nc, patient_name)
         model = calibrated(model, gain, compliance)
+    if model.jam is not None:
+        j = model.jam
+        chain_note += (
+            f"; units inside the actuator jam at {j.jam_deg:.2f} deg, slope {j.slope:g} past it, free-end decay "
+            f"{j.decay_units:g} units (cascade.jam)"
+        )
     log.info("patient %s: chain: %s", patient_name, chain_note)
     limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
     targets = {
