@@ -111,7 +111,8 @@ class Study:
         self.P, self.A = ds.pressure_2d_kpa.values, ds.angle_fea_deg.values
         self.fit = ds.role.values == "fit"
         self.sets = ds.set_name.values
-        self.bare = calibrated(self.chain, np.ones(3), np.zeros(3))  # gain 1, no give beyond the straps'
+        # gain 1, no give beyond the straps', no jam (whatever the config says)
+        self.bare = replace(calibrated(self.chain, np.ones(3), np.zeros(3)), jam=None)
         cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["cascade"]
         cfg["jam"] = dict(cfg["jam"], use=True)
         self.bare_jam = replace(self.bare, jam=jam_model(cfg))

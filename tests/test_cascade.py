@@ -541,7 +541,7 @@ def test_chain_with_the_jam_bends_less_and_plans_agree_with_it():
     # paper rule's plan is the jam-capped units' (the planner and the chain use one unit response)
     from workflow.actuator.jam import JamModel
 
-    jam = JamModel.from_geometry(ACTUATOR)
+    jam = JamModel.from_geometry(ACTUATOR, decay_units=2.0)  # with the free end's layer, as the actuator alone
     free, capped = model(), model(jam=jam)
     p = np.array([250, 0, 250, 0, 200, 0, 200, 0], float)
     assert np.all(C.solve_equilibrium(capped, p).joint_angles_deg < C.solve_equilibrium(free, p).joint_angles_deg)
@@ -557,3 +557,11 @@ def test_chain_with_the_jam_bends_less_and_plans_agree_with_it():
     # the whole actuator drawn free: the free end's units bend more than the interior's at one pressure
     th_units, _ = kinematics.free_shape(capped, [250, 0] * 4)
     assert th_units[-1] == pytest.approx(th) and th_units[-1] > 1.9 * th_units[capped.n_units // 2]
+
+
+def test_the_default_chain_caps_its_units_at_table_6s_jam_angle(config):
+    from workflow.cascade.patient import jam_model
+
+    jam = jam_model(config["cascade"])
+    assert jam.jam_deg == pytest.approx(3.3506, abs=1e-4) and jam.slope == 0.1 and jam.decay_units == 0.0
+    assert jam_model({**config["cascade"], "jam": {"use": False}}) is None

@@ -11,7 +11,8 @@ thirteen units (docs/actuator.md, "A unit inside a long actuator") gives, for it
 and the unit model's own bend below J; mirrored for extension (the section is symmetric about the paper).  Near the
 actuator's free end the bend returns to the unit model's over a boundary layer that decays by about 0.6 per unit
 (a decay length of two units): unit k from the free end bends ``theta_c + exp(-k / decay) (theta_unit - theta_c)``,
-``theta_c`` the capped bend, the last two units (k = 0, 1) alike.
+``theta_c`` the capped bend, the last two units (k = 0, 1) alike.  On the finger the straps hold the distal units and
+the finger-actuator FEA is matched better without that layer (the chain's default, ``decay_units = 0``).
 
 Pure functions, vectorised; angles deg.
 """
@@ -59,7 +60,7 @@ class JamModel:
 
     jam_deg: float
     slope: float = 0.1
-    decay_units: float = 2.0
+    decay_units: float = 0.0  # 2 for the actuator alone; on the finger the straps hold the distal units
     width_deg: float = 0.2
 
     def __post_init__(self):
