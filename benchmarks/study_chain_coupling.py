@@ -9,6 +9,8 @@ theta = coupling(S) - (c_strap + c) m + b, solved for equilibrium with the finge
 * ``full``: theta = G S with a full 3 x 3 matrix (a span moving the other joints);
 * ``asym``: separate gains for flexing and extending span bends (contact pushes, straps pull);
 * ``diag+offset``: the rule's form with an angle offset b per joint.
+* ``jam``, ``jam+give``, ``jam+diag``: the units capped at their jam angle (:mod:`workflow.actuator.jam`, the
+  config's slope and free-end decay), with nothing fitted, the gives, or the rule's gains and gives.
 
 Least squares (``scipy.optimize.least_squares``) from the paper's chain, within the rule's bounds (gains on the
 diagonal and the flexing / extending gains 0.1-1.5, gives -20-20 rad/N m; off-diagonal gains -1.5-1.5, offsets
