@@ -565,3 +565,18 @@ def test_the_default_chain_caps_its_units_at_table_6s_jam_angle(config):
     jam = jam_model(config["cascade"])
     assert jam.jam_deg == pytest.approx(3.3506, abs=1e-4) and jam.slope == 0.1 and jam.decay_units == 0.0
     assert jam_model({**config["cascade"], "jam": {"use": False}}) is None
+
+
+def test_a_jammed_span_is_stiffer_by_the_jams_slope():
+    from workflow.actuator.jam import JamModel, capped_bend_deg, capped_bend_slope
+
+    th = np.linspace(-20, 20, 4001)
+    fd = np.gradient(capped_bend_deg(th, 3.35, 0.1), th)
+    np.testing.assert_allclose(capped_bend_slope(th, 3.35, 0.1)[1:-1], fd[1:-1], atol=2e-3)
+    jam = JamModel.from_geometry(ACTUATOR)
+    free, capped = model(), model(jam=jam)
+    p = np.array([[300, 0, 300, 0, 300, 0, 300, 0], [20, 0, 20, 0, 20, 0, 20, 0]], float)
+    k0 = stiffness.span_stiffness_nm_per_deg(free, 1, p)  # PIP span: four units in series and the strap
+    k1 = stiffness.span_stiffness_nm_per_deg(capped, 1, p)
+    assert k1[0] > 3.0 * k0[0]  # 8.7 deg free at 300 kPa: past the jam, the units follow a tenth
+    assert k1[1] == pytest.approx(k0[1], rel=1e-6)  # 0.58 deg at 20 kPa: below it, unchanged

@@ -25,7 +25,7 @@ import numpy as np
 
 from workflow.fem.actuator import jam_angle_deg
 
-__all__ = ["JamModel", "capped_bend_deg", "free_end_weights"]
+__all__ = ["JamModel", "capped_bend_deg", "capped_bend_slope", "free_end_weights"]
 
 
 def _softplus(x: np.ndarray) -> np.ndarray:
@@ -54,6 +54,14 @@ def free_end_weights(n_units: int, decay_units: float) -> np.ndarray:
     return np.exp(-k / float(decay_units))
 
 
+def capped_bend_slope(theta_deg, jam_deg: float, slope: float, width_deg: float = 0.2) -> np.ndarray:
+    """d :func:`capped_bend_deg` / d theta (1): 1 below the jam angle, ``slope`` past it."""
+    th = np.asarray(theta_deg, float)
+    w = float(width_deg)
+    sig = 0.5 * (1.0 + np.tanh(0.5 * (th - jam_deg) / w)) + 0.5 * (1.0 + np.tanh(0.5 * (-th - jam_deg) / w))
+    return 1.0 - (1.0 - float(slope)) * sig
+
+
 @dataclass(frozen=True)
 class JamModel:
     """The jam of a unit inside the actuator: angle (deg), slope past it (1), the free end's decay (units)."""
@@ -78,3 +86,9 @@ class JamModel:
         th = np.asarray(theta_deg, float)
         tc = capped_bend_deg(th, self.jam_deg, self.slope, self.width_deg)
         return tc + np.asarray(end_weight, float) * (th - tc)
+
+    def bend_slope(self, theta_deg, end_weight) -> np.ndarray:
+        """d :meth:`bend_deg` / d theta (1): how much of a change of the unit model's bend the unit follows (its
+        compliance to a moment is the unit model's times this)."""
+        c = capped_bend_slope(theta_deg, self.jam_deg, self.slope, self.width_deg)
+        return c + np.asarray(end_weight, float) * (1.0 - c)
