@@ -15,6 +15,7 @@ import xarray as xr
 
 from workflow.actuator.sampled_region import flag_pressure_table
 from workflow.cascade.calibration import calibrated
+from workflow.cascade.patient import chain_note as describe_chain
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
 from workflow.cascade.planning import PLANNERS, plan_exercise
 from workflow.cascade.plans_data import planners_dataset, plans_dataset
@@ -97,12 +98,7 @@ def write_cascade_plan(
     if calibration_nc is not None:
         gain, compliance, chain_note = read_calibration(calibration_nc, patient_name)
         model = calibrated(model, gain, compliance)
-    if model.jam is not None:
-        j = model.jam
-        chain_note += (
-            f"; units inside the actuator jam at {j.jam_deg:.2f} deg, slope {j.slope:g} past it, free-end decay "
-            f"{j.decay_units:g} units (cascade.jam)"
-        )
+    chain_note = describe_chain(model, chain_note)
     log.info("patient %s: chain: %s", patient_name, chain_note)
     limits = loads["active_limit_nm"].sel(joint=list(JOINTS)).values
     targets = {

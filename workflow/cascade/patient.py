@@ -16,7 +16,15 @@ from workflow.cascade.finger import Finger
 from workflow.cascade.model import CascadeModel, build_cascade
 from workflow.common.constants import JOINTS
 
-__all__ = ["linear_springs", "patient_finger", "patient_cascade", "plan_limit", "plan_options"]
+__all__ = [
+    "chain_note",
+    "jam_model",
+    "linear_springs",
+    "patient_finger",
+    "patient_cascade",
+    "plan_limit",
+    "plan_options",
+]
 
 
 def patient_finger(
@@ -106,6 +114,17 @@ def patient_cascade(
         layout_shift_mm=float(c.get("layout_shift_mm", 0.0)),
         strap_stiffness_n_per_m=c["strap_stiffness_n_per_m"],
         jam=jam_model(c),
+    )
+
+
+def chain_note(model: CascadeModel, base: str = "the paper's chain (no calibration)") -> str:
+    """What the chain is, for a dataset's attrs and the log: ``base`` and, with one, the jam model's settings."""
+    j = model.jam
+    if j is None:
+        return base
+    return (
+        f"{base}; units inside the actuator jam at {j.jam_deg:.2f} deg, slope {j.slope:g} past it, free-end decay "
+        f"{j.decay_units:g} units (cascade.jam)"
     )
 
 

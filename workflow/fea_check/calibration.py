@@ -131,7 +131,10 @@ def run_chain_calibration(
             "angle_chain_before_deg": (
                 ("state", "joint"),
                 before,
-                {"units": "degree", "long_name": "joint angle of the paper's chain (2D unit)"},
+                {
+                    "units": "degree",
+                    "long_name": "joint angle of the chain before calibration (2D unit; cascade.jam as configured)",
+                },
             ),
             "angle_chain_after_deg": (
                 ("state", "joint"),

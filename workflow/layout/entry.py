@@ -15,7 +15,7 @@ import xarray as xr
 
 from workflow.cascade.calibration import calibrated
 from workflow.cascade.entry import read_calibration
-from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
+from workflow.cascade.patient import chain_note, patient_cascade, patient_finger, plan_limit, plan_options
 from workflow.cascade.planning import plan_exercise
 from workflow.common.constants import GROUPS, JOINTS
 from workflow.common.provenance import open_result, write_dataset
@@ -55,6 +55,7 @@ def write_layout_search(
     chain = "the paper's chain (no calibration)"
     if calibration_nc is not None:
         gains, compl, chain = read_calibration(calibration_nc, patient_name)
+    chain = chain_note(base, chain)
     lr_mm, mass_g = base.unit_length_m * 1e3, base.unit_mass_kg * 1e3
     tip_mm, shift_mm = fing.tip_x_m * 1e3, float(c.get("layout_shift_mm", 0.0))
     cands = candidate_layouts(
