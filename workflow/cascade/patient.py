@@ -133,8 +133,9 @@ def jam_model(cascade_cfg: Mapping[str, Any]) -> JamModel | None:
     j = cascade_cfg.get("jam") or {}
     if not j.get("use", False):
         return None
+    keys = {"slope": "slope", "decay_units": "free_end_decay_units"}  # unset: the schema's defaults, as JamModel's
     return JamModel.from_geometry(
-        cascade_cfg["unit_geometry_mm"], slope=float(j["slope"]), decay_units=float(j["free_end_decay_units"])
+        cascade_cfg["unit_geometry_mm"], **{k: float(j[c]) for k, c in keys.items() if c in j}
     )
 
 

@@ -18,8 +18,8 @@ def span_stiffness_nm_per_deg(model, joint: int, p8: np.ndarray) -> np.ndarray:
     """Rotational stiffness of a joint's span (N m per degree of joint rotation) at pressures ``p8`` (n, 8) kPa: its
     units in series and the span's give, 1 / (g sum_g n_g / k_g + c), with k_g the unit model's stiffness
     (``stiffness_nm_per_deg``; with the chain's jam model divided by the slope of its bend at the free angle: a
-    unit past its jam angle is that much stiffer), g the span's gain and c its give in degrees per N m (the straps' and the calibrated
-    rest, :mod:`workflow.cascade.model`)."""
+    unit past its jam angle is that much stiffer), g the span's gain and c its give in degrees per N m (the straps'
+    and the calibrated rest, :mod:`workflow.cascade.model`)."""
     unit = model.unit
     if not hasattr(unit, "stiffness_nm_per_deg"):
         raise TypeError(f"{type(unit).__name__} has no stiffness_nm_per_deg: the stiffness planner needs one")
