@@ -532,8 +532,9 @@ def test_jam_caps_an_interior_units_bend_smoothly_and_oddly():
     w = free_end_weights(6, 2.0)
     np.testing.assert_allclose(w, np.exp(-np.array([4, 3, 2, 1, 0, 0]) / 2.0))
     assert np.all(free_end_weights(6, 0.0) == 0.0)
-    with pytest.raises(ValueError, match="slope"):
-        JamModel(3.35, slope=1.5)
+    for bad in (1.5, 0.0):  # a zero slope: flat past the jam, no unique inverse
+        with pytest.raises(ValueError, match="slope"):
+            JamModel(3.35, slope=bad)
 
 
 def test_chain_with_the_jam_bends_less_and_plans_agree_with_it():
@@ -553,7 +554,8 @@ def test_chain_with_the_jam_bends_less_and_plans_agree_with_it():
     target = C.solve_equilibrium(capped, np.array([150, 0, 150, 0, 100, 0, 60, 0], float)).joint_angles_deg
     plan = planning.plan_exercise(capped, target, tol_deg=5.0, active_limits_nm=LIMITS, planner="paper")
     assert plan.achieved, plan.reason
-    assert np.max(np.abs(plan.equilibrium.joint_angles_deg - target)) <= 5.0
+    # the rule solves each span's bend exactly on the jam-capped units (on the raw unit model it would miss by ~3 deg)
+    assert np.max(np.abs(plan.equilibrium.joint_angles_deg - target)) <= 0.05
     # the whole actuator drawn free: the free end's units bend more than the interior's at one pressure
     th_units, _ = kinematics.free_shape(capped, [250, 0] * 4)
     assert th_units[-1] == pytest.approx(th) and th_units[-1] > 1.9 * th_units[capped.n_units // 2]
@@ -580,3 +582,10 @@ def test_a_jammed_span_is_stiffer_by_the_jams_slope():
     k1 = stiffness.span_stiffness_nm_per_deg(capped, 1, p)
     assert k1[0] > 3.0 * k0[0]  # 8.7 deg free at 300 kPa: past the jam, the units follow a tenth
     assert k1[1] == pytest.approx(k0[1], rel=1e-6)  # 0.58 deg at 20 kPa: below it, unchanged
+    # under a span moment the stiffness is the chain's own: the span bend's change per moment, by finite differences
+    for pp, m in ((p[0], 0.15), (p[0], 0.0), ([100, 0] * 4, -0.05)):
+        pp = np.asarray(pp, float)
+        dm = 1e-6
+        bend = [C._span_angles_deg(capped, pp, np.full(3, mm))[1][1] for mm in (m - dm, m + dm)]
+        k_fd = 2 * dm / abs(bend[1] - bend[0])  # N m per degree of the span, the strap's give included
+        assert stiffness.span_stiffness_nm_per_deg(capped, 1, pp[None, :], m)[0] == pytest.approx(k_fd, rel=1e-3)

@@ -10,8 +10,8 @@ thirteen units (docs/actuator.md, "A unit inside a long actuator") gives, for it
 
 and the unit model's own bend below J; mirrored for extension (the section is symmetric about the paper).  Near the
 actuator's free end the bend returns to the unit model's over a boundary layer that decays by about 0.6 per unit
-(a decay length of two units): unit k from the free end bends ``theta_c + exp(-k / decay) (theta_unit - theta_c)``,
-``theta_c`` the capped bend, the last two units (k = 0, 1) alike.  On the finger the straps hold the distal units and
+(a decay length of two units): the unit k places before the last two bends ``theta_c + exp(-k / decay) (theta_unit -
+theta_c)``, ``theta_c`` the capped bend, and the last two units the unit model's bend.  On the finger the straps hold the distal units and
 the finger-actuator FEA is matched better without that layer (the chain's default, ``decay_units = 0``).
 
 Pure functions, vectorised; angles deg.
@@ -72,8 +72,9 @@ class JamModel:
     width_deg: float = 0.2
 
     def __post_init__(self):
-        if not (self.jam_deg > 0 and 0.0 <= self.slope <= 1.0 and self.width_deg > 0):
-            raise ValueError(f"jam model: need jam > 0 deg, 0 <= slope <= 1, width > 0; got {self}")
+        # a zero slope would make the capped bend flat past the jam: no unique inverse, an infinite stiffness
+        if not (self.jam_deg > 0 and 0.0 < self.slope <= 1.0 and self.width_deg > 0):
+            raise ValueError(f"jam model: need jam > 0 deg, 0 < slope <= 1, width > 0; got {self}")
 
     @classmethod
     def from_geometry(cls, geometry_mm, **kwargs) -> "JamModel":

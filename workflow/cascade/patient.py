@@ -131,7 +131,7 @@ def chain_note(model: CascadeModel, base: str = "the paper's chain (no calibrati
 def jam_model(cascade_cfg: Mapping[str, Any]) -> JamModel | None:
     """The config's ``cascade.jam`` as a :class:`JamModel` on the unit's Table 6 geometry, or None where it is off."""
     j = cascade_cfg.get("jam") or {}
-    if not j.get("use", False):
+    if not j.get("use", True):  # the schema's default
         return None
     keys = {"slope": "slope", "decay_units": "free_end_decay_units"}  # unset: the schema's defaults, as JamModel's
     return JamModel.from_geometry(

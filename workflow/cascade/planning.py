@@ -137,7 +137,7 @@ def _span_plan(
         e = bend(P)
         ok = np.abs(e) <= goal
         if np.any(ok) and k_required is not None:
-            ks = span_stiffness_nm_per_deg(model, joint, full(P[ok]))
+            ks = span_stiffness_nm_per_deg(model, joint, full(P[ok]), m_req)
             stiff = ks >= k_required
             if np.any(stiff):
                 cand = np.flatnonzero(ok)[stiff]

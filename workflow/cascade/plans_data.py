@@ -143,7 +143,15 @@ def plans_dataset(
     if hasattr(model.unit, "stiffness_nm_per_deg"):
         ds["span_stiffness_nm_per_deg"] = (
             ("exercise", "joint"),
-            np.array([[span_stiffness_nm_per_deg(model, j, p.pressures_kpa)[0] for j in range(3)] for p in plans]),
+            np.array(
+                [
+                    [
+                        span_stiffness_nm_per_deg(model, j, p.pressures_kpa, p.equilibrium.actuator_moments_nm[j])[0]
+                        for j in range(3)
+                    ]
+                    for p in plans
+                ]
+            ),
             {"units": "N m / degree", "long_name": "rotational stiffness of each joint's span of units (unit model)"},
         )
     ds.attrs.update(

@@ -14,12 +14,12 @@ from workflow.cascade.model import CascadeModel, _required_moments, _span_compli
 __all__ = ["span_stiffness_nm_per_deg", "load_stiffness_nm_per_deg"]
 
 
-def span_stiffness_nm_per_deg(model, joint: int, p8: np.ndarray) -> np.ndarray:
+def span_stiffness_nm_per_deg(model, joint: int, p8: np.ndarray, m_nm: float = 0.0) -> np.ndarray:
     """Rotational stiffness of a joint's span (N m per degree of joint rotation) at pressures ``p8`` (n, 8) kPa: its
     units in series and the span's give, 1 / (g sum_g n_g / k_g + c), with k_g the unit model's stiffness
-    (``stiffness_nm_per_deg``; with the chain's jam model divided by the slope of its bend at the free angle: a
-    unit past its jam angle is that much stiffer), g the span's gain and c its give in degrees per N m (the straps'
-    and the calibrated rest, :mod:`workflow.cascade.model`)."""
+    (``stiffness_nm_per_deg``; with the chain's jam model divided by the slope of its bend at the unit's angle under
+    the span moment ``m_nm`` (N m): a unit past its jam angle is that much stiffer), g the span's gain and c its give
+    in degrees per N m (the straps' and the calibrated rest, :mod:`workflow.cascade.model`)."""
     unit = model.unit
     if not hasattr(unit, "stiffness_nm_per_deg"):
         raise TypeError(f"{type(unit).__name__} has no stiffness_nm_per_deg: the stiffness planner needs one")
@@ -31,7 +31,8 @@ def span_stiffness_nm_per_deg(model, joint: int, p8: np.ndarray) -> np.ndarray:
             pt, pb = p8[:, 2 * g], p8[:, 2 * g + 1]
             k = np.asarray(unit.stiffness_nm_per_deg(pt, pb), float)
             if model.jam is not None:  # a jammed unit follows a tenth of its moment's change: stiffer by that much
-                k = k / model.jam.bend_slope(unit.free_angle_deg(pt, pb), model.group_end_share()[g])
+                th = unit.angle_deg(pt, pb, np.full(pt.shape, float(m_nm)))
+                k = k / model.jam.bend_slope(th, model.group_end_share()[g])
             compliance = compliance + counts[g] / k
     compliance = float(model.span_gain[joint]) * compliance + np.rad2deg(_span_compliance(model)[joint])
     with np.errstate(divide="ignore"):
