@@ -547,10 +547,13 @@ def test_chain_with_the_jam_bends_less_and_plans_agree_with_it():
     p = np.array([250, 0, 250, 0, 200, 0, 200, 0], float)
     assert np.all(C.solve_equilibrium(capped, p).joint_angles_deg < C.solve_equilibrium(free, p).joint_angles_deg)
     # a group's mean bend: the interior cap for the CMC group, far from the free end; the unit model's at the tip
-    share = capped.group_end_share()
+    share = capped.group_end_share
     assert share[0] < 1e-3 and share[3] > 0.5
-    th = LinearUnit().free_angle_deg(250.0, 0.0)
-    assert C.group_bends_deg(capped, 0, 250.0, 0.0, 0.0) == pytest.approx(jam.bend_deg(th, share[0]))
+    th = LinearUnit().free_angle_deg(250.0, 0.0)  # 7.25 deg, past the 3.35 deg jam
+    # the CMC group, far from the free end: the closed form J + s (theta - J), not the unit model's theta
+    assert C.group_bends_deg(capped, 0, 250.0, 0.0, 0.0) == pytest.approx(
+        jam.jam_deg + 0.1 * (th - jam.jam_deg), abs=0.01
+    )
     target = C.solve_equilibrium(capped, np.array([150, 0, 150, 0, 100, 0, 60, 0], float)).joint_angles_deg
     plan = planning.plan_exercise(capped, target, tol_deg=5.0, active_limits_nm=LIMITS, planner="paper")
     assert plan.achieved, plan.reason

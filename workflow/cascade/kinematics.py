@@ -25,9 +25,7 @@ def free_shape(model: CascadeModel, pressures_kpa, m_ext_nm: float = 0.0) -> tup
     """Stand-alone actuator (no finger, no gravity): unit angles (deg, per unit)
     and the backbone polyline (m) from the hand end, under a uniform moment."""
     pt = pressures_table(pressures_vector(pressures_kpa))[model.unit_group]
-    th = np.asarray(model.unit.angle_deg(pt[:, 0], pt[:, 1], np.full(model.n_units, m_ext_nm)), float)
-    if model.jam is not None:
-        th = model.jam.bend_deg(th, model.end_weights())
+    th = model.bends_deg(model.unit.angle_deg(pt[:, 0], pt[:, 1], np.full(model.n_units, m_ext_nm)), model.end_weights)
     return th, backbone_polyline(model, th)
 
 

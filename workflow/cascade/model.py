@@ -55,6 +55,7 @@ Over 400 lines: the cascade's forward model and its equilibrium solve (with its 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
@@ -174,14 +175,24 @@ class CascadeModel:
     def n_units(self) -> int:
         return int(self.unit_group.size)
 
+    # Derived once per model (the root finders call the span bends hundreds of times); ``replace`` builds a new model,
+    # so a changed layout or jam model never sees a stale value.
+    @cached_property
     def end_weights(self) -> np.ndarray:
         """(N,) each unit's free-end weight of the jam model (0 without one)."""
         return np.zeros(self.n_units) if self.jam is None else free_end_weights(self.n_units, self.jam.decay_units)
 
+    @cached_property
     def group_end_share(self) -> np.ndarray:
         """(4,) the mean free-end weight of each group's units."""
-        w = self.end_weights()
+        w = self.end_weights
         return np.array([w[self.unit_group == g].mean() if np.any(self.unit_group == g) else 0.0 for g in range(4)])
+
+    def bends_deg(self, theta_deg, end_weight) -> np.ndarray:
+        """Bend (deg) of units whose unit-model bend is ``theta_deg`` and free-end weight ``end_weight``: the jam
+        model's, or ``theta_deg`` itself without one (broadcast). Every caller of the unit model's angle goes here."""
+        th = np.asarray(theta_deg, float)
+        return th if self.jam is None else self.jam.bend_deg(th, end_weight)
 
     def span_counts(self) -> np.ndarray:
         """(joint, group) number of units of each group in each joint's span."""
@@ -317,8 +328,7 @@ def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> t
     pg = np.repeat(pt, 3, axis=0)  # (12, 2): group-major
     mm = np.tile(np.asarray(m_nm, float), 4)
     th = np.asarray(model.unit.angle_deg(pg[:, 0], pg[:, 1], mm), float).reshape(4, 3)  # (group, joint)
-    if model.jam is not None:
-        th = model.jam.bend_deg(th, model.group_end_share()[:, None])
+    th = model.bends_deg(th, model.group_end_share[:, None])
     counts = model.span_counts()  # (joint, group)
     # the joint lags the units by the span's give: a strap stretched by the moment the actuator drives the finger with
     span = np.asarray(model.span_gain, float) * np.sum(counts * th.T, axis=1) - np.rad2deg(
@@ -331,8 +341,7 @@ def _span_angles_deg(model: CascadeModel, p8: np.ndarray, m_nm: np.ndarray) -> t
 def group_bends_deg(model: CascadeModel, group: int, p_top_kpa, p_bottom_kpa, m_nm) -> np.ndarray:
     """Mean bend (deg) of group ``group``'s units at these pressures (kPa) under the span moment ``m_nm`` (N m):
     the unit model's, or with a jam model its interior and free-end bends averaged over the group (broadcast)."""
-    th = np.asarray(model.unit.angle_deg(p_top_kpa, p_bottom_kpa, m_nm), float)
-    return th if model.jam is None else model.jam.bend_deg(th, model.group_end_share()[group])
+    return model.bends_deg(model.unit.angle_deg(p_top_kpa, p_bottom_kpa, m_nm), model.group_end_share[group])
 
 
 def _required_moments(

@@ -201,10 +201,12 @@ def _span_plan_paper(
         raise ValueError(f"the {JOINTS[joint]} span has no units: nothing to plan")
     give = np.rad2deg(_span_compliance(model)[joint] * m_req)
     theta_u = (target + give) / (float(model.span_gain[joint]) * n_units)
-    counts = model.span_counts()[joint]
+    # the mean bend of the span's units, all at the same pressures: linear in the free-end weight, so one unit-model
+    # evaluation at the span's mean weight
+    share = float(model.span_counts()[joint] @ model.group_end_share) / n_units
 
-    def unit_bend(pt, pb, m):  # the mean bend of the span's units, all at the same pressures
-        return sum(counts[g] * group_bends_deg(model, g, pt, pb, m) for g in range(4) if counts[g]) / n_units
+    def unit_bend(pt, pb, m):
+        return model.bends_deg(model.unit.angle_deg(pt, pb, m), share)
 
     x = np.linspace(0.0, p_max, n)
     at_max = np.full(n, p_max)

@@ -31,8 +31,7 @@ def span_stiffness_nm_per_deg(model, joint: int, p8: np.ndarray, m_nm: float = 0
             pt, pb = p8[:, 2 * g], p8[:, 2 * g + 1]
             k = np.asarray(unit.stiffness_nm_per_deg(pt, pb), float)
             if model.jam is not None:  # a jammed unit follows a tenth of its moment's change: stiffer by that much
-                th = unit.angle_deg(pt, pb, np.full(pt.shape, float(m_nm)))
-                k = k / model.jam.bend_slope(th, model.group_end_share()[g])
+                k = k / model.jam.bend_slope(unit.angle_deg(pt, pb, float(m_nm)), model.group_end_share[g])
             compliance = compliance + counts[g] / k
     compliance = float(model.span_gain[joint]) * compliance + np.rad2deg(_span_compliance(model)[joint])
     with np.errstate(divide="ignore"):
