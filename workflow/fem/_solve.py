@@ -462,14 +462,18 @@ def solve_path(
         steps += 1
         # a step that fails is retried once with the line search switched (it
         # helps in some contact states and hurts in others) before cutting back
+        whys = []
         for ls in (opts["line_search"], not opts["line_search"]):
             try:
                 ok, u_new, its, why, info = _newton(model, guess, target, p_ref, dict(opts, line_search=ls))
             except Exception as exc:  # never let one point stop a sweep
                 ok, u_new, its, why, info = False, u, 0, f"error: {exc!r}", {}
             iters += its
+            whys.append(f"{why} ({'with' if ls else 'without'} line search)")
             if ok or why.startswith("inverted"):
                 break
+        # a stop names every attempt's failure: the retry's (often an inverted element) alone hides the first's
+        why = "; ".join(whys)
         if ok:
             u_prev, u = u, u_new
             lam, dlam_prev = target, target - lam
