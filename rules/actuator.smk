@@ -7,6 +7,7 @@
 rule unit_check:
     input:
         unpack(get_fem_choice),
+        unpack(get_fem_cases),
         code=code_files("scripts.unit_check"),
     output:
         nc=report("results/actuator/unit_check.nc", caption="../report/unit_check.rst", category="Actuator"),

@@ -351,6 +351,12 @@ def get_fem_choice(wildcards):
     return {"fidelity": "results/fidelity/fem.nc"} if fidelity_auto() else {}
 
 
+def get_fem_cases(wildcards):
+    """Input function: the FE study's cases, when fidelity.auto picks the mesh: the unit check reads the chosen
+    case's rays instead of solving them again (the study ran them on the same mesh and config)."""
+    return {"cases": expand("results/fidelity/fem/{case}.nc", case=FEM_CASES)} if fidelity_auto() else {}
+
+
 def get_opensim_model(wildcards):
     """Input function: the reference OpenSim model, when the backend has one (direct sampling)."""
     if config["musculoskeletal"]["backend"] == "opensim":

@@ -2,9 +2,14 @@
 
 import meshio
 import numpy as np
+import pytest
 import xarray as xr
 
 from workflow.actuator import entry_fem
+from workflow.common.fidelity_choice import FemCase, case_actuator
+from workflow.common.provenance import open_result
+from workflow.fem._config import unit_check, unit_mesh_from_config
+from workflow.fidelity.entry_fem import write_fem_case
 
 
 def test_unit_check_dataset_follows_the_contract(tmp_path):
@@ -33,3 +38,61 @@ def test_unit_check_dataset_follows_the_contract(tmp_path):
         assert key in ds.attrs
     m = meshio.read(vtu)
     assert "displacement" in m.point_data and m.points.shape[1] == 3
+
+
+ACT = {
+    "mesh": {"h_2d_mm": 2.0},
+    "unit_check": {"models": ["2d"], "p_top_kpa": [10.0, 30.0]},
+    "solver": {"initial_step": 0.25},
+}
+
+
+@pytest.fixture(scope="module")
+def studied_case(tmp_path_factory):
+    """The FE study's case of the 2D unit on the check's mesh, with the study's Newton budget."""
+    path = tmp_path_factory.mktemp("study") / "fem_2d_h2_contact.nc"
+    write_fem_case(
+        "fem_2d_h2_contact", path, actuator=ACT, config_slice={}, p_top_kpa=[10.0, 30.0], iteration_budget=1200
+    )
+    return open_result(path)
+
+
+def test_the_unit_check_takes_the_studied_case_instead_of_solving_it_again(studied_case, tmp_path, monkeypatch):
+    """The study's case runs the check's own rays (its Newton budget only ends a ray early): a case that reached
+    every point is read, not solved again, and its values are the ones a solve gives, to the last digit."""
+    case = studied_case
+    act = case_actuator(ACT, FemCase("2d", 2.0, True))
+    solved, _ = unit_check(act, ("2d",), [10.0, 30.0])  # what the check solves without the study
+    for name in ("bending_angle_deg", "bending_moment_nm", "newton_iterations", "status"):
+        np.testing.assert_array_equal(case[name].values, solved[name].sel(model="2d").values)
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("solved again")
+
+    monkeypatch.setattr(entry_fem, "unit_check", no_solve)
+    nc, vtu = tmp_path / "unit_check.nc", tmp_path / "unit_3d_300kpa.vtu"
+    entry_fem.write_unit_check(nc, vtu, ACT, config_slice={}, model_actuators={"2d": act}, studied={"2d": case})
+    ds = xr.open_dataset(nc)
+    assert ds["bending_angle_deg"].dims == ("model", "p_top_kpa")
+    assert ds["status"].dims == ("model", "p_top_kpa", "case")
+    np.testing.assert_array_equal(ds["bending_moment_nm"].sel(model="2d").values, solved["bending_moment_nm"][0])
+    assert "fem_2d_h2_contact" in ds.attrs["unit_check_source_2d"]
+
+
+def test_a_studied_case_that_failed_or_differs_is_solved_again(studied_case):
+    case = studied_case
+    act = case_actuator(ACT, FemCase("2d", 2.0, True))
+    assert entry_fem.studied_unit_check(case, act, "2d", [10.0, 30.0]) is not None
+    failed = case.copy()
+    failed["status"] = failed["status"].where(failed["p_top_kpa"] < 20.0, 1)
+    assert entry_fem.studied_unit_check(failed, act, "2d", [10.0, 30.0]) is None
+    assert entry_fem.studied_unit_check(case, act, "2d", [10.0, 60.0]) is None  # other points
+    finer = case_actuator(ACT, FemCase("2d", 1.0, True))
+    assert entry_fem.studied_unit_check(case, finer, "2d", [10.0, 30.0]) is None  # another mesh
+    # the 3D check writes the deformed unit: a 3D case without the free ray's displacement cannot stand in for it
+    as3d = case.assign_attrs(model="3d", h_mm=4.0)
+    act3 = case_actuator(dict(ACT, mesh={"h_3d_mm": 4.0}), FemCase("3d", 4.0, True))
+    assert entry_fem.studied_unit_check(as3d, act3, "3d", [10.0, 30.0]) is None
+    n = unit_mesh_from_config(act3, 3).mesh.p.size
+    known = entry_fem.studied_unit_check(as3d.assign(displacement_mm=("dof", np.zeros(n))), act3, "3d", [10.0, 30.0])
+    assert known is not None and known[1][1].size == n

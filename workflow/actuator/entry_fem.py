@@ -7,6 +7,7 @@ rerun minutes of FEA.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -19,7 +20,9 @@ from workflow.common.provenance import write_dataset
 from workflow.common.vtu import write_vtu
 from workflow.fem._config import unit_check, unit_mesh_from_config
 
-__all__ = ["write_unit_check", "write_shard"]
+__all__ = ["write_unit_check", "studied_unit_check", "write_shard"]
+
+log = logging.getLogger(__name__)
 
 
 def write_unit_check(
@@ -31,22 +34,39 @@ def write_unit_check(
     config_slice=None,
     model_actuators: Mapping[str, Mapping] | None = None,
     attrs: Mapping | None = None,
+    studied: Mapping[str, xr.Dataset] | None = None,
 ) -> None:
     """Run ``unit_check`` with the config's points and write the dataset and the deformed 3D unit.
 
     ``model_actuators``: a config per model (``{"2d": ..., "3d": ...}``, e.g.
     the meshes a fidelity study chose), else ``actuator`` for all; ``attrs``
-    are added to the dataset.  If the 3D model is not requested or its ray
-    fails, the .vtu holds the undeformed 3D mesh with zero displacement (and
-    the dataset's status says why).
+    are added to the dataset.  ``studied``: per model, the FE study's case on
+    that same mesh and config (``results/fidelity/fem/<case>.nc``); where it
+    reached every point its rays are these rays, so they are taken from it
+    instead of being solved again (see :func:`studied_unit_check`).  If the 3D
+    model is not requested or its ray fails, the .vtu holds the undeformed 3D
+    mesh with zero displacement (and the dataset's status says why).
     """
 
     uc = dict(actuator.get("unit_check", {}))
     models = tuple(uc.get("models", ("2d", "3d")))
     p_top = uc.get("p_top_kpa", (60.0, 180.0, 300.0))
     if model_actuators:
-        parts = [unit_check(model_actuators.get(m, actuator), (m,), p_top) for m in models]
-        ds = xr.concat([p[0] for p in parts], dim="model")
+        parts, source = [], {}
+        for m in models:
+            act = model_actuators.get(m, actuator)
+            known = studied_unit_check(studied.get(m), act, m, p_top) if studied else None
+            if known is None:
+                known = unit_check(act, (m,), p_top)
+                source[f"unit_check_source_{m}"] = "solved here"
+            else:
+                source[f"unit_check_source_{m}"] = (
+                    f"the FE study's case {studied[m].attrs.get('case', '?')}: the same rays, not solved again"
+                )
+            log.info("unit check %s: %s", m, source[f"unit_check_source_{m}"])
+            parts.append(known)
+        ds = xr.concat([p[0] for p in parts], dim="model", combine_attrs="drop")
+        ds.attrs.update(source)
         deformed = next((p[1] for p in parts if p[1] is not None), None)
         actuator = model_actuators.get("3d", actuator)
     else:
@@ -65,6 +85,42 @@ def write_unit_check(
         deformed = (mesh, np.zeros(mesh.mesh.p.size))
     mesh, u = deformed
     write_vtu(mesh.mesh, u, vtu_path, cell_data={"material": mesh.material})
+
+
+def studied_unit_check(case: xr.Dataset | None, actuator: Mapping, model: str, p_top_kpa) -> tuple | None:
+    """The unit check of ``model`` read from the FE study's case ``case``, or None where it must be solved.
+
+    The study's case (:func:`workflow.fidelity.entry_fem.write_fem_case`) runs this same ``unit_check`` on the
+    same mesh, contact and solver, with a Newton budget per ray that only ends a ray early: a case that reached
+    every point was not touched by it, so its values, statuses and times are the rays' own (the solver's path
+    does not depend on what ran before it).  Taken only if the case's element size, contact and points are the
+    check's and every point converged.  Returns ``(dataset with a model dimension, (mesh, displacement) or
+    None)`` as ``unit_check`` does.
+    """
+    if case is None:
+        return None
+    h = float(dict(actuator.get("mesh", {})).get(f"h_{model}_mm", np.nan))
+    contact = bool(dict(actuator.get("contact", {})).get("enabled", True))
+    same = (
+        str(case.attrs.get("model")) == model
+        and np.isclose(float(case.attrs.get("h_mm", np.nan)), h)
+        and bool(int(case.attrs.get("contact", -1))) == contact
+        and np.allclose(np.sort(case["p_top_kpa"].values), np.sort(np.asarray(p_top_kpa, float)))
+    )
+    if not same or not bool((case["status"] == 0).all()):
+        return None
+    deformed = None
+    if "displacement_mm" in case:
+        mesh = unit_mesh_from_config(actuator, int(model[0]))
+        u = case["displacement_mm"].values
+        if u.size != mesh.mesh.p.size:
+            return None
+        deformed = (mesh, u)
+    elif model == "3d":  # the check's .vtu needs the 3D free ray's displacement
+        return None
+    ds = case.drop_vars(["case_wall_time_s", "displacement_mm"], errors="ignore").expand_dims(model=[model])
+    ds.attrs = {}
+    return ds, deformed
 
 
 def write_shard(
