@@ -10,7 +10,8 @@ theta = coupling(S) - (c_strap + c) m + b, solved for equilibrium with the finge
 * ``asym``: separate gains for flexing and extending span bends (contact pushes, straps pull);
 * ``diag+offset``: the rule's form with an angle offset b per joint.
 * ``jam``, ``jam+give``, ``jam+diag``: the units capped at their jam angle (:mod:`workflow.actuator.jam`, the
-  config's slope and free-end decay), with nothing fitted, the gives, or the rule's gains and gives.
+  config's slope and free-end decay), with nothing fitted, the gives, or the rule's gains and gives;
+  ``jam+full``, ``jam+asym``, ``jam+diag+offset``: the richer couplings above on the jam-capped units.
 
 Least squares (``scipy.optimize.least_squares``) from the paper's chain, within the rule's bounds (gains on the
 diagonal and the flexing / extending gains 0.1-1.5, gives -20-20 rad/N m; off-diagonal gains -1.5-1.5, offsets
@@ -56,6 +57,8 @@ START = {
     "jam+give": np.zeros(3),  # the gives fitted
     "jam+diag": np.r_[np.ones(3), np.zeros(3)],  # the rule's gains and gives on top of the jam
 }
+# the richer couplings on top of the jam as well
+START.update({f"jam+{k}": START[k] for k in ("full", "asym", "diag+offset")})
 
 
 def _chain(ds: xr.Dataset):
@@ -76,7 +79,7 @@ def _chain(ds: xr.Dataset):
 def _bounds(kind: str) -> tuple[np.ndarray, np.ndarray]:
     gain, give, off, offset = (0.1, 1.5), (-20.0, 20.0), (-1.5, 1.5), (-30.0, 30.0)
     if kind.startswith("jam"):
-        kind = {"jam": "none", "jam+give": "give", "jam+diag": "diag"}[kind]
+        kind = {"jam": "none", "jam+give": "give"}.get(kind, kind.removeprefix("jam+"))
         if kind == "none":
             return np.zeros(0), np.zeros(0)
         if kind == "give":
@@ -96,7 +99,8 @@ def _unpack(x: np.ndarray, kind: str):
         return np.eye(3), np.zeros(3), np.zeros(3)
     if kind == "jam+give":
         return np.eye(3), x[:3], np.zeros(3)
-    if kind in ("diag", "jam+diag"):
+    kind = kind.removeprefix("jam+")
+    if kind == "diag":
         return np.diag(x[:3]), x[3:6], np.zeros(3)
     if kind == "full":
         return x[:9].reshape(3, 3), x[9:12], np.zeros(3)
