@@ -77,6 +77,10 @@ def test_the_unit_check_takes_the_studied_case_instead_of_solving_it_again(studi
     assert ds["status"].dims == ("model", "p_top_kpa", "case")
     np.testing.assert_array_equal(ds["bending_moment_nm"].sel(model="2d").values, solved["bending_moment_nm"][0])
     assert "fem_2d_h2_contact" in ds.attrs["unit_check_source_2d"]
+    for name in ("bending_angle_deg", "bending_moment_nm", "max_penetration_mm", "wall_time_s", "status"):
+        for key in ("units", "long_name"):  # as the contract has them
+            assert ds[name].attrs[key] == solved[name].attrs[key]
+    assert ds["status"].attrs["flag_meanings"] == solved["status"].attrs["flag_meanings"]
 
 
 def test_a_studied_case_that_failed_or_differs_is_solved_again(studied_case):

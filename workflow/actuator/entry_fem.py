@@ -65,8 +65,8 @@ def write_unit_check(
                 )
             log.info("unit check %s: %s", m, source[f"unit_check_source_{m}"])
             parts.append(known)
-        ds = xr.concat([p[0] for p in parts], dim="model", combine_attrs="drop")
-        ds.attrs.update(source)
+        ds = xr.concat([p[0] for p in parts], dim="model")  # the variables keep their units and names
+        ds.attrs = dict(source)
         deformed = next((p[1] for p in parts if p[1] is not None), None)
         actuator = model_actuators.get("3d", actuator)
     else:
