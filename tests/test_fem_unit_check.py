@@ -91,6 +91,7 @@ def test_a_studied_case_that_failed_or_differs_is_solved_again(studied_case):
     failed["status"] = failed["status"].where(failed["p_top_kpa"] < 20.0, 1)
     assert entry_fem.studied_unit_check(failed, act, "2d", [10.0, 30.0]) is None
     assert entry_fem.studied_unit_check(case, act, "2d", [10.0, 60.0]) is None  # other points
+    assert entry_fem.studied_unit_check(case, act, "2d", [10.0, 30.0, 60.0]) is None  # more points
     finer = case_actuator(ACT, FemCase("2d", 1.0, True))
     assert entry_fem.studied_unit_check(case, finer, "2d", [10.0, 30.0]) is None  # another mesh
     # the 3D check writes the deformed unit: a 3D case without the free ray's displacement cannot stand in for it
