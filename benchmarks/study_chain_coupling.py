@@ -9,11 +9,13 @@ theta = coupling(S) - (c_strap + c) m + b, solved for equilibrium with the finge
 * ``full``: theta = G S with a full 3 x 3 matrix (a span moving the other joints);
 * ``asym``: separate gains for flexing and extending span bends (contact pushes, straps pull);
 * ``diag+offset``: the rule's form with an angle offset b per joint;
-* ``signed``: as ``asym``, the extending gains free to turn negative (an extension command that flexes the joint).
+* ``signed``: as ``asym``, the extending gains free to turn negative (an extension command that flexes the joint);
+* ``diag+strap``: the rule's form and a term that turns the PIP and the DIP by a gain times the PIP span's extending
+  bend (max(-S_PIP, 0), smoothed): the face the PIP group lengthens between the PIP and DIP straps.
 * ``jam``, ``jam+give``, ``jam+diag``: the units capped at their jam angle (:mod:`workflow.actuator.jam`, the
   config's slope and free-end decay), with nothing fitted, the gives, or the rule's gains and gives;
-  ``jam+full``, ``jam+asym``, ``jam+diag+offset``, ``jam+signed``: the richer couplings above on the jam-capped
-  units.
+  ``jam+full``, ``jam+asym``, ``jam+diag+offset``, ``jam+signed``, ``jam+diag+strap``: the richer couplings above
+  on the jam-capped units.
 
 Least squares (``scipy.optimize.least_squares``) from the paper's chain, within the rule's bounds (gains on the
 diagonal and the flexing / extending gains 0.1-1.5, gives -20-20 rad/N m; off-diagonal gains -1.5-1.5, offsets
@@ -52,6 +54,7 @@ from workflow.cascade.patient import jam_model, patient_cascade, patient_finger 
 from workflow.common.provenance import open_result  # noqa: E402
 
 RES = ROOT / "results"
+STRAP_WIDTH_DEG = 0.5  # smoothing of the PIP span's extending bend max(-S_PIP, 0) (deg), for the root finder
 FAILED_DEG = 90.0
 START = {
     "diag": np.r_[np.ones(3), np.zeros(3)],
@@ -59,13 +62,14 @@ START = {
     "asym": np.r_[np.ones(6), np.zeros(3)],
     "diag+offset": np.r_[np.ones(3), np.zeros(6)],
     "signed": np.r_[np.ones(6), np.zeros(3)],
+    "diag+strap": np.r_[np.ones(3), np.zeros(5)],
     # the units inside the actuator capped at their jam angle (workflow.actuator.jam, the config's slope and decay)
     "jam": np.zeros(0),  # nothing fitted: the paper's chain with the jam
     "jam+give": np.zeros(3),  # the gives fitted
     "jam+diag": np.r_[np.ones(3), np.zeros(3)],  # the rule's gains and gives on top of the jam
 }
 # the richer couplings on top of the jam as well
-START.update({f"jam+{k}": START[k] for k in ("full", "asym", "diag+offset", "signed")})
+START.update({f"jam+{k}": START[k] for k in ("full", "asym", "diag+offset", "signed", "diag+strap")})
 
 
 def _chain(ds: xr.Dataset):
@@ -97,25 +101,30 @@ def _bounds(kind: str) -> tuple[np.ndarray, np.ndarray]:
     else:
         gains = [gain] * 3 + [off] * 3 if kind == "signed" else [gain] * (6 if kind == "asym" else 3)
         parts = gains + [give] * 3 + ([offset] * 3 if kind == "diag+offset" else [])
+        parts += [off] * 2 if kind == "diag+strap" else []
     lo, hi = np.array(parts, float).T
     return lo, hi
 
 
 def _unpack(x: np.ndarray, kind: str):
-    """(coupling, give c rad/N m (3,), offset b deg (3,)); coupling is a matrix or (flexing, extending) gains."""
+    """(coupling, give c rad/N m (3,), offset b deg (3,), strap term (3,)); coupling is a matrix or (flexing,
+    extending) gains; the strap term turns each joint by its entry times the PIP span's extending bend."""
+    z = np.zeros(3)
     if kind == "jam":
-        return np.eye(3), np.zeros(3), np.zeros(3)
+        return np.eye(3), z, z, z
     if kind == "jam+give":
-        return np.eye(3), x[:3], np.zeros(3)
+        return np.eye(3), x[:3], z, z
     kind = kind.removeprefix("jam+")
     if kind == "diag":
-        return np.diag(x[:3]), x[3:6], np.zeros(3)
+        return np.diag(x[:3]), x[3:6], z, z
     if kind == "full":
-        return x[:9].reshape(3, 3), x[9:12], np.zeros(3)
+        return x[:9].reshape(3, 3), x[9:12], z, z
     if kind in ("asym", "signed"):
-        return (x[:3], x[3:6]), x[6:9], np.zeros(3)
+        return (x[:3], x[3:6]), x[6:9], z, z
     if kind == "diag+offset":
-        return np.diag(x[:3]), x[3:6], x[6:9]
+        return np.diag(x[:3]), x[3:6], x[6:9], z
+    if kind == "diag+strap":
+        return np.diag(x[:3]), x[3:6], z, np.r_[0.0, x[6], x[7]]
     raise ValueError(f"unknown coupling {kind!r}; one of {sorted(START)}")
 
 
@@ -140,7 +149,7 @@ class Study:
         return cm._span_angles_deg(self.bare_jam if jam else self.bare, p8, m)[1] + np.rad2deg(self.c_strap * m)
 
     def angles(self, x: np.ndarray, kind: str, rows: np.ndarray) -> np.ndarray:
-        G, c, b = _unpack(x, kind)
+        G, c, b, k_strap = _unpack(x, kind)
         out = np.full((rows.sum(), 3), np.nan)
         for k, i in enumerate(np.flatnonzero(rows)):
 
@@ -148,7 +157,8 @@ class Study:
                 m = cm._required_moments(self.chain, t)[0]
                 S = self.span_bends(p8, m, jam=kind.startswith("jam"))
                 th = G[0] * np.maximum(S, 0) + G[1] * np.minimum(S, 0) if isinstance(G, tuple) else G @ S
-                return th - np.rad2deg((self.c_strap + c) * m) + b - t
+                ext = STRAP_WIDTH_DEG * np.logaddexp(0.0, -S[1] / STRAP_WIDTH_DEG)  # PIP span's extension, smooth
+                return th + k_strap * ext - np.rad2deg((self.c_strap + c) * m) + b - t
 
             with np.errstate(all="ignore"):
                 sol = root(res, self.A[i], method="hybr", tol=1e-10)
