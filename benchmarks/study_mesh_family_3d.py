@@ -15,6 +15,12 @@ ray takes over an hour.
 
     python benchmarks/study_mesh_family_3d.py --refine 2,3,4 --cases blocked,free
     python benchmarks/study_mesh_family_3d.py --summary      # the table from the CSV only
+
+``--dim 2`` runs the same study on the 2D unit (plane strain), whose meshes of h = 1, 0.5, 0.25, 0.125 mm are
+nested already (every interval of Table 6 is a whole number of 0.125 mm): the family is the h = 1 mm counts times
+``refine`` = 1, 2, 4, 8, r = 1 being the default mesh, figures -> benchmarks/out/mesh_family_2d.csv.  The 2D free
+rays of the finer meshes stop before 300 kPa (docs/fea.md, "Mesh convergence"), so ``--pressures`` sets the rays'
+end and stops (kPa; default 60,180,300), e.g. ``--dim 2 --pressures 5,60 --refine 1,2,4,8 --cases free`` (-> mesh_family_2d_5-60.csv).
 """
 
 from __future__ import annotations
@@ -36,28 +42,40 @@ from workflow.fem._config import layer_options, solve_unit_from_config  # noqa: 
 from workflow.fidelity.analysis import richardson  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "out"
-CSV = OUT / "mesh_family_3d.csv"
-BASE_H = 4.0  # mm: the family's coarsest counts
+BASE_H = {3: 4.0, 2: 1.0}  # mm: the family's coarsest counts (2D: the default mesh itself)
 P_KPA = (60.0, 180.0, 300.0)
 KEY = {"free": "bending_angle_deg", "blocked": "bending_moment_nm"}
 
 
-def _actuator() -> dict:
-    return dict(yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["actuator"])
+def _actuator(band: float | None = None) -> dict:
+    """The config's actuator section; ``band`` (mm) replaces the contact band and drops the restarts that only
+    widen it, so that every mesh's value is on the same band."""
+    act = dict(yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["actuator"])
+    if band is not None:
+        act["contact"] = dict(act["contact"], smoothing_mm=band)
+        act["restarts"] = [r for r in act.get("restarts", []) if set(r) - {"contact"}]
+    return act
 
 
-def solve_ray(refine: int | None, case: str) -> dict:
-    """One ray; ``refine`` None = the config's default 3D mesh (h_3d_mm)."""
-    act = _actuator()
+def _csv(dim: int, p_kpa=P_KPA, band: float | None = None) -> Path:
+    """One CSV per dimension, set of pressures and contact band (rays that differ in these do not share rows)."""
+    tail = "" if tuple(p_kpa) == P_KPA else "_" + "-".join(f"{p:g}" for p in p_kpa)
+    tail += "" if band is None else f"_band{band:g}"
+    return OUT / f"mesh_family_{dim}d{tail}.csv"
+
+
+def solve_ray(refine: int | None, case: str, dim: int = 3, p_kpa=P_KPA, band: float | None = None) -> dict:
+    """One ray to ``p_kpa[-1]`` landing on the others; ``refine`` None = the config's default mesh (h_3d_mm / h_2d_mm)."""
+    act = _actuator(band)
     if refine is None:
-        h = float(act["mesh"]["h_3d_mm"])
-        um = build_unit_mesh(act["geometry"], h=h, dim=3, **layer_options(act))
+        h = float(act["mesh"][f"h_{dim}d_mm"])
+        um = build_unit_mesh(act["geometry"], h=h, dim=dim, **layer_options(act))
     else:
-        h = BASE_H / refine
-        um = build_unit_mesh(act["geometry"], h=BASE_H, dim=3, refine=refine, **layer_options(act))
-    stops = tuple(p / P_KPA[-1] for p in P_KPA[:-1])
+        h = BASE_H[dim] / refine
+        um = build_unit_mesh(act["geometry"], h=BASE_H[dim], dim=dim, refine=refine, **layer_options(act))
+    stops = tuple(p / p_kpa[-1] for p in p_kpa[:-1])
     t0 = time.perf_counter()
-    res = solve_unit_from_config(act, 3, P_KPA[-1], 0.0, case, mesh=um, stops=stops)
+    res = solve_unit_from_config(act, dim, p_kpa[-1], 0.0, case, mesh=um, stops=stops)
     row = {
         "mesh": "default" if refine is None else f"refine{refine}",
         "refine": 0 if refine is None else refine,
@@ -67,7 +85,7 @@ def solve_ray(refine: int | None, case: str) -> dict:
         "case": case,
         "status": res.status,
         "reason": res.reason,
-        "p_reached_kpa": res.load_factor * P_KPA[-1],
+        "p_reached_kpa": res.load_factor * p_kpa[-1],
         "attempt": res.attempt,
         "contact_smoothing_mm": res.contact_smoothing_mm,
         "steps": res.steps,
@@ -75,22 +93,22 @@ def solve_ray(refine: int | None, case: str) -> dict:
         "newton_iterations": res.newton_iterations,
         "wall_time_s": time.perf_counter() - t0,
     }
-    for p in P_KPA:
+    for p in p_kpa:
         hit = [s[KEY[case]] for s in res.history if abs(s["p_top_kpa"] - p) < 1e-6]
         row[f"{KEY[case]}_{int(p)}"] = hit[0] if hit else np.nan
     return row
 
 
-def summary(df: pd.DataFrame) -> pd.DataFrame:
+def summary(df: pd.DataFrame, p_kpa=P_KPA) -> pd.DataFrame:
     """Per case and pressure: the family's three values, observed order, limit, GCI, default mesh vs the limit."""
     rows = []
     fam = df[df["refine"] > 0].sort_values("refine")
     for case, key in KEY.items():
         f = fam[fam["case"] == case]
         d = df[(df["refine"] == 0) & (df["case"] == case)]
-        for p in P_KPA:
+        for p in p_kpa:
             col = f"{key}_{int(p)}"
-            if len(f) < 3:
+            if col not in f or len(f) < 3:
                 continue
             h, v = f["h_mm"].to_numpy()[-3:], f[col].to_numpy()[-3:]
             r = richardson(h, v)
@@ -104,9 +122,9 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
                     "asymptotic": r.asymptotic,
                     "limit": r.limit,
                     "gci_finest_pct": 100 * r.gci_fine,
-                    "default_2mm": dflt,
+                    "default": dflt,
                     "default_vs_limit_pct": 100 * (dflt - r.limit) / abs(r.limit) if r.asymptotic else np.nan,
-                    "family_2mm_vs_limit_pct": 100 * (v[np.argmax(h)] - r.limit) / abs(r.limit)
+                    "coarsest_vs_limit_pct": 100 * (v[np.argmax(h)] - r.limit) / abs(r.limit)
                     if r.asymptotic
                     else np.nan,
                 }
@@ -116,11 +134,16 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--refine", default="2,3,4", help="multipliers of the h = 4 mm counts")
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=3)
+    ap.add_argument("--refine", default="2,3,4", help="multipliers of the h = 4 mm (3D) / 1 mm (2D) counts")
     ap.add_argument("--cases", default="blocked,free")
-    ap.add_argument("--default", action="store_true", help="also solve the default 2 mm mesh's rays")
+    ap.add_argument("--pressures", default="60,180,300", help="kPa: the rays' stops and end (P_B = 0)")
+    ap.add_argument("--default", action="store_true", help="also solve the default mesh's rays")
+    ap.add_argument("--band", type=float, default=None, help="mm: one contact band for every ray (no band restarts)")
     ap.add_argument("--summary", action="store_true", help="only print the table from the CSV")
     a = ap.parse_args(argv)
+    p_kpa = tuple(float(p) for p in a.pressures.split(","))
+    CSV = _csv(a.dim, p_kpa, a.band)
     OUT.mkdir(parents=True, exist_ok=True)
     if not a.summary:
         done = pd.read_csv(CSV) if CSV.exists() else pd.DataFrame(columns=["mesh", "case"])
@@ -131,14 +154,14 @@ def main(argv=None) -> None:
             if ((done["mesh"] == name) & (done["case"] == case)).any():
                 continue
             print(f"{name} {case} ...", flush=True)
-            row = solve_ray(r, case)
+            row = solve_ray(r, case, a.dim, p_kpa, a.band)
             print(row, flush=True)
             done = pd.concat([done, pd.DataFrame([row])], ignore_index=True)
             done.to_csv(CSV, index=False)
     df = pd.read_csv(CSV)
     with pd.option_context("display.width", 250, "display.max_columns", 30):
         print(df.drop(columns=["reason"]).to_string(index=False))
-        print(summary(df).to_string(index=False))
+        print(summary(df, p_kpa).to_string(index=False))
 
 
 if __name__ == "__main__":
