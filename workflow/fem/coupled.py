@@ -175,9 +175,8 @@ class CoupledSetup:
     springs: Sequence[tuple[Callable, Callable]]
     strap_k: float
     strap_joints: Sequence[str] = ("PIP", "DIP")
-    strap_mode: str = (
-        "pin"  # "pin": a strap holds the actuator node in every direction; "slide": across the finger only
-    )
+    # "pin": a strap holds the actuator node in every direction; "slide": across the finger only
+    strap_mode: str = "pin"
     strap_tangential_ratio: float = 0.0  # "slide": share of the strap stiffness left along the finger
     gravity: np.ndarray | None = None
     contact: dict = field(default_factory=dict)
