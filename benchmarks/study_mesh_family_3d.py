@@ -132,6 +132,45 @@ def summary(df: pd.DataFrame, p_kpa=P_KPA) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def plot_convergence(frames, path: str) -> None:
+    """Log-log plot of |value - limit| / |limit| against h per CSV (``frames``: (table, label)), case and pressure,
+    the limit from the three finest meshes where they are asymptotic; a slope-1 guide."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    hs = set()
+    for df, label in frames:
+        fam = df[df["refine"] > 0].sort_values("refine")
+        for case, key in KEY.items():
+            f = fam[fam["case"] == case]
+            for col in [c for c in f.columns if c.startswith(key + "_")]:
+                ok = f[col].notna().to_numpy()
+                if ok.sum() < 3:
+                    continue
+                h, v = f["h_mm"].to_numpy()[ok], f[col].to_numpy()[ok]
+                r = richardson(h[-3:], v[-3:])
+                if not r.asymptotic:
+                    continue
+                hs.update(h.tolist())
+                lab = f"{case}, {col.rsplit('_', 1)[1]} kPa, {label} (order {r.order:.2f})"
+                ax.loglog(h, np.abs(v - r.limit) / abs(r.limit) * 100, "o-", label=lab)
+    hh = np.array([min(hs), max(hs)])
+    ax.loglog(hh, 3.0 * hh / hh.max(), "k:", label="slope 1")
+    ax.set_xticks(sorted(hs), [f"{v:g}" for v in sorted(hs)])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.set_xlabel("element size h (mm)")
+    ax.set_ylabel("distance from the Richardson limit (%)")
+    ax.legend(fontsize=7)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dim", type=int, choices=(2, 3), default=3)
@@ -141,6 +180,10 @@ def main(argv=None) -> None:
     ap.add_argument("--default", action="store_true", help="also solve the default mesh's rays")
     ap.add_argument("--band", type=float, default=None, help="mm: one contact band for every ray (no band restarts)")
     ap.add_argument("--summary", action="store_true", help="only print the table from the CSV")
+    ap.add_argument("--plot", default=None, help="PNG: each quantity's distance from its Richardson limit against h")
+    ap.add_argument(
+        "--plot-also", default="", help="other CSVs of this study whose curves join the plot (comma-separated)"
+    )
     a = ap.parse_args(argv)
     p_kpa = tuple(float(p) for p in a.pressures.split(","))
     CSV = _csv(a.dim, p_kpa, a.band)
@@ -162,6 +205,13 @@ def main(argv=None) -> None:
     with pd.option_context("display.width", 250, "display.max_columns", 30):
         print(df.drop(columns=["reason"]).to_string(index=False))
         print(summary(df, p_kpa).to_string(index=False))
+    if a.plot:
+
+        def label(stem: str) -> str:  # the band, where the CSV has one
+            return stem[stem.find("band") :].replace("band", "band ") + " mm" if "band" in stem else "config's band"
+
+        others = [(pd.read_csv(c), label(Path(c).stem)) for c in a.plot_also.split(",") if c]
+        plot_convergence([(df, label(CSV.stem)), *others], a.plot)
 
 
 if __name__ == "__main__":
