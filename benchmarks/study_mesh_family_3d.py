@@ -1,4 +1,5 @@
-"""Mesh convergence of the 3D unit on a systematic family: not a test, figures -> benchmarks/out/mesh_family_3d.csv.
+"""Mesh convergence of the unit on a systematic family (3D; 2D with ``--dim 2``): not a test, figures ->
+benchmarks/out/mesh_family_{3d,2d}*.csv.
 
 The meshes h = 2 / 1.4 / 1 mm refine the unit's intervals at different steps (a 2 mm wall gets 1, 1 and 2
 elements), so their differences need not shrink by a constant factor (docs/fea.md, "Self-contact").  Here every
@@ -6,8 +7,9 @@ interval's element count of the h = 4 mm mesh, the paper and base layers include
 2, 3, 4 (`build_unit_mesh(..., refine=r)`): each element keeps its shape and its size is divided by r, so the
 nominal sizes 2, 1.33, 1 mm are exact and the refinement ratios 1.5 and 1.33.  Per mesh the blocked and the free
 ray to P_T = 300 kPa (P_B = 0) with the config's contact, solver and restarts, values at 60 / 180 / 300 kPa; then
-the observed order, Richardson limit and grid convergence index (Celik et al. 2008) per quantity, and the default
-2 mm mesh's value (read from ``--default`` rows or solved here) against the limit.
+the observed order, Richardson limit and grid convergence index (Celik et al. 2008) per quantity from the three
+finest meshes that reached that pressure, and the default mesh's value against the limit (3D: the ``--default``
+rows; 2D: refine = 1, which is the default mesh).
 
 Each ray is appended to the CSV as soon as it ends, and a rerun skips the rays already there (interrupting loses
 only the ray under way).  One core: ``OMP_NUM_THREADS=1 python benchmarks/study_mesh_family_3d.py``; the r = 4 free
@@ -53,7 +55,10 @@ def _actuator(band: float | None = None) -> dict:
     act = dict(yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["actuator"])
     if band is not None:
         act["contact"] = dict(act["contact"], smoothing_mm=band)
-        act["restarts"] = [r for r in act.get("restarts", []) if set(r) - {"contact"}]
+        # every restart keeps its other settings, none changes the band
+        act["restarts"] = [
+            {k: v for k, v in r.items() if k != "contact"} for r in act.get("restarts", []) if set(r) - {"contact"}
+        ]
     return act
 
 
@@ -99,18 +104,20 @@ def solve_ray(refine: int | None, case: str, dim: int = 3, p_kpa=P_KPA, band: fl
     return row
 
 
-def summary(df: pd.DataFrame, p_kpa=P_KPA) -> pd.DataFrame:
-    """Per case and pressure: the family's three values, observed order, limit, GCI, default mesh vs the limit."""
+def summary(df: pd.DataFrame, p_kpa=P_KPA, dim: int = 3) -> pd.DataFrame:
+    """Per case and pressure: the three finest values that reached it, observed order, limit, GCI, default mesh vs
+    the limit (2D: refine = 1 is the default mesh)."""
     rows = []
     fam = df[df["refine"] > 0].sort_values("refine")
     for case, key in KEY.items():
         f = fam[fam["case"] == case]
-        d = df[(df["refine"] == 0) & (df["case"] == case)]
+        d = df[(df["refine"] == (1 if dim == 2 else 0)) & (df["case"] == case)]
         for p in p_kpa:
             col = f"{key}_{int(p)}"
-            if col not in f or len(f) < 3:
+            if col not in f or f[col].notna().sum() < 3:
                 continue
-            h, v = f["h_mm"].to_numpy()[-3:], f[col].to_numpy()[-3:]
+            ok = f[col].notna().to_numpy()
+            h, v = f["h_mm"].to_numpy()[ok][-3:], f[col].to_numpy()[ok][-3:]
             r = richardson(h, v)
             dflt = float(d[col].iloc[-1]) if len(d) else np.nan
             rows.append(
@@ -204,7 +211,7 @@ def main(argv=None) -> None:
     df = pd.read_csv(CSV)
     with pd.option_context("display.width", 250, "display.max_columns", 30):
         print(df.drop(columns=["reason"]).to_string(index=False))
-        print(summary(df, p_kpa).to_string(index=False))
+        print(summary(df, p_kpa, a.dim).to_string(index=False))
     if a.plot:
 
         def label(stem: str) -> str:  # the band, where the CSV has one
