@@ -79,13 +79,13 @@ def test_strap_spring_is_rigid_body_invariant():
     assert strap.force(x) == pytest.approx(6.0)
 
 
-@pytest.mark.parametrize("beta", [0.0, 0.05])
-def test_sliding_strap_holds_across_the_finger_only_and_its_force_and_tangent_are_derivatives(beta):
+@pytest.mark.parametrize("beta", [0.01, 0.05])
+def test_sliding_strap_holds_across_the_finger_fully_and_along_it_by_its_share(beta):
     from workflow.fem.finger2d import SlidingStrap
 
     # actuator node 0 over the joint node 2 of two bone chords (1, 2) and (2, 3); the finger's line is x at rest
     p = np.array([[0.0, -10.0, 0.0, 8.0], [5.0, 0.0, 0.0, 0.0]])
-    strap = SlidingStrap(8, p, 0, [(1, 2), (2, 3)], 3.0, tangential_ratio=beta)
+    strap = SlidingStrap(8, p, 0, [(1, 2), (2, 3)], 3.0, hold_along=beta)
     along, across = p.copy(), p.copy()
     along[0, 0] += 2.0
     across[1, 0] += 0.5
@@ -94,8 +94,8 @@ def test_sliding_strap_holds_across_the_finger_only_and_its_force_and_tangent_ar
     np.testing.assert_allclose(strap.evaluate(across, None, 1.0, False)[0][:2], [0.0, 1.5])
     c, s = np.cos(0.7), np.sin(0.7)  # a rigid motion of finger and actuator together: no force
     assert np.abs(strap.evaluate(np.array([[c, -s], [s, c]]) @ p + 3.0, None, 1.0, False)[0]).max() < 1e-12
-    # a general state: the force is the energy's gradient (the normal turning with the bones included), the tangent
-    # the force's derivative and symmetric
+    # a general state: the force is the energy's gradient (the normal turning with the bones included), so its
+    # tangent is symmetric (a force that missed the normal's variation is not a gradient, and its tangent is not)
     x = p + 0.3 * np.random.default_rng(1).standard_normal(p.shape)
     f, K = strap.evaluate(x, None, 1.0)
 
@@ -105,16 +105,29 @@ def test_sliding_strap_holds_across_the_finger_only_and_its_force_and_tangent_ar
         return 0.5 * strap.k * (gn**2 + beta * (g2 - gn**2))
 
     h, v = 1e-6, x.T.ravel()
-    E = np.eye(8) * h
-    fd = np.array([(energy(v + e) - energy(v - e)) / (2 * h) for e in E])
+    fd = np.array([(energy(v + e) - energy(v - e)) / (2 * h) for e in np.eye(8) * h])
     np.testing.assert_allclose(f, fd, atol=1e-8)
-
-    def force(v):
-        return strap.evaluate(v.reshape(-1, 2).T, None, 1.0, False)[0]
-
-    Kfd = np.column_stack([(force(v + 10 * e) - force(v - 10 * e)) / (20 * h) for e in E])
-    np.testing.assert_allclose(K.toarray(), Kfd, atol=1e-6)
     np.testing.assert_allclose(K.toarray(), K.toarray().T, atol=1e-8)
+
+
+def test_a_strap_that_holds_fully_along_the_finger_is_the_pinned_strap():
+    from workflow.fem.finger2d import SlidingStrap, strap
+
+    p = np.array([[0.0, -10.0, 0.0, 8.0], [5.0, 0.0, 0.0, 0.0]])
+    chords = [(1, 2), (2, 3)]
+    pinned = strap(8, p, 0, chords, 3.0, 1.0)
+    assert type(pinned) is StrapSpring
+    assert isinstance(strap(8, p, 0, chords, 3.0, 0.5), SlidingStrap)
+    with pytest.raises(ValueError, match="hold along the finger"):
+        strap(8, p, 0, chords, 3.0, 0.0)  # nothing would hold the actuator along the finger
+    # the sliding strap's energy at share 1 is the pinned strap's: same force, and its finite-difference tangent
+    # is the pinned strap's exact constant one
+    full = SlidingStrap(8, p, 0, chords, 3.0, hold_along=1.0)
+    x = p + 0.3 * np.random.default_rng(2).standard_normal(p.shape)
+    (f1, K1), (f2, K2) = full.evaluate(x, None, 1.0), pinned.evaluate(x, None, 1.0)
+    np.testing.assert_allclose(f1, f2, atol=1e-12)
+    np.testing.assert_allclose(K1.toarray(), K2.toarray(), atol=1e-6)
+    assert full.force(x) == pytest.approx(pinned.force(x))
 
 
 def test_support_plane_pushes_up_what_sinks_below_it_and_its_tangent_is_its_derivative():

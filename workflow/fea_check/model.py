@@ -56,8 +56,7 @@ DEFAULT_FEA_CHECK: dict[str, Any] = {
     "finger_penalty_factor": 100.0,
     "slide_stiffness_n_per_mm": 1.0e-6,
     "hand_support": False,
-    "straps": "pin",
-    "strap_tangential_ratio": 0.0,
+    "strap_hold_along": 1.0,
     "tip_min_depth_ratio": 0.35,
     "penetration_bound_mm": 0.1,
     # the retry that passes the blocks' first corner contact (measured on the mean finger's gravity phase)
@@ -217,8 +216,7 @@ def build_patient_fea(
         contact=contact,
         slide_k=float(fc["slide_stiffness_n_per_mm"]),
         hand_support=bool(fc["hand_support"]),
-        strap_mode=str(fc["straps"]),
-        strap_tangential_ratio=float(fc["strap_tangential_ratio"]),
+        strap_hold_along=float(fc["strap_hold_along"]),
         formulation=actuator_cfg.get("formulation", fem.DEFAULT_FORMULATION),
     )
     notes = (

@@ -14,9 +14,9 @@ Couplings:
   above the joint to the point of the dorsal skin above the joint centre,
   carried by the two adjacent bones (on the bisector of the joint angle);
   a strap resists relative motion in every direction (it wraps the finger),
-  so it also holds the actuator along the finger (``strap_mode`` "pin"), or
-  only across the finger, the actuator sliding through it (``SlidingStrap``,
-  ``strap_mode`` "slide");
+  so it also holds the actuator along the finger; with ``strap_hold_along``
+  below 1 only that share of its stiffness acts along the finger, the
+  actuator sliding through it (``SlidingStrap``);
 * the sliding support at the hand end of the actuator, as in the plan: the end
   face keeps its height and stays perpendicular to the hand (u_y = 0, one
   shared u_x) and may slide along the hand; a ground spring of negligible
@@ -67,9 +67,8 @@ from workflow.fem.finger2d import (
     FingerMesh,
     HingeSpring,
     RigidRotationUpdate,
-    SlidingStrap,
-    StrapSpring,
     SupportPlane,
+    strap,
 )
 
 from ..common.constants import JOINTS
@@ -175,9 +174,7 @@ class CoupledSetup:
     springs: Sequence[tuple[Callable, Callable]]
     strap_k: float
     strap_joints: Sequence[str] = ("PIP", "DIP")
-    # "pin": a strap holds the actuator node in every direction; "slide": across the finger only
-    strap_mode: str = "pin"
-    strap_tangential_ratio: float = 0.0  # "slide": share of the strap stiffness left along the finger
+    strap_hold_along: float = 1.0  # share of a strap's stiffness along the finger (1: as across it)
     gravity: np.ndarray | None = None
     contact: dict = field(default_factory=dict)
     slide_k: float = 1e-6
@@ -268,9 +265,7 @@ def coupled_model(
         j = JOINTS.index(joint)
         jn = cm.finger_node(fm.nodes[f"joint_{joint}"])
         chords = [tuple(cm.finger_node(i) for i in fm.chords[k]) for k in (j - 1, j) if k >= 0]
-        args = (n, p, _strap_anchor(cm, jn), chords, setup.strap_k)
-        sliding = setup.strap_mode == "slide"
-        straps[joint] = SlidingStrap(*args, setup.strap_tangential_ratio) if sliding else StrapSpring(*args)
+        straps[joint] = strap(n, p, _strap_anchor(cm, jn), chords, setup.strap_k, setup.strap_hold_along)
     slide = DofSpring(n, [2 * clamp[0]], setup.slide_k)
     extras = [*hinges.values(), *straps.values(), slide]
     eps = contact_penalty(setup.mat, c)

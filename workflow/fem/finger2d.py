@@ -335,40 +335,32 @@ class StrapSpring:
 
 
 class SlidingStrap(StrapSpring):
-    """A strap that holds the actuator node to the finger point across the finger only: along the finger's dorsal
-    line the actuator slides through it freely (a band round finger and actuator, frictionless), where
-    ``StrapSpring`` pins it in every direction.
+    """A strap that holds the actuator node to the finger point fully across the finger and with a share of its
+    stiffness along it (a band round finger and actuator that the actuator can slide through), where
+    ``StrapSpring`` holds it fully in every direction.
 
     Energy k/2 [(n . g)^2 + beta (t . g)^2], g the gap of ``StrapSpring``, n the unit normal to the mean direction
-    t of the bone chords, which turns with the bones, and beta = ``tangential_ratio`` the share of the strap's
-    stiffness left along the finger (0: frictionless; 1: ``StrapSpring``); the force is its exact gradient (n's
-    variation included), the tangent a central difference of that force over the strap's few local dofs.  ``k`` in
-    N/mm (per mm of width in 2D).
+    t of the bone chords, which turns with the bones, and beta = ``hold_along`` in (0, 1) the share of the strap's
+    stiffness left along the finger (beta = 1 is ``StrapSpring``'s energy k/2 |g|^2); the force is its exact
+    gradient (n's variation included), the tangent a central difference of that force over the strap's few local
+    dofs.  ``k`` in N/mm (per mm of width in 2D).
     """
 
     #: relative step of the tangent's central difference
     FD_STEP = 1e-6
 
     def __init__(
-        self,
-        ndofs: int,
-        p_ref: np.ndarray,
-        node: int,
-        chords: Sequence[tuple[int, int]],
-        k: float,
-        tangential_ratio: float = 0.0,
+        self, ndofs: int, p_ref: np.ndarray, node: int, chords: Sequence[tuple[int, int]], k: float, hold_along: float
     ):
         super().__init__(ndofs, p_ref, node, chords, k)
         self.nchords = len(chords)
-        self.beta = float(tangential_ratio)
+        self.beta = float(hold_along)
 
-    def _local_force(self, XL: np.ndarray) -> np.ndarray:
-        """Force (m, 2 nl) of local coordinate rows XL (m, 2 nl), node-interleaved in the order of ``dofs``
-        (the actuator node, then each chord's two nodes)."""
-        P = XL.reshape(XL.shape[0], -1, 2)
-        g = XL @ self.B.T  # (m, 2)
-        s = np.zeros((XL.shape[0], 2))
+    def _normal(self, P: np.ndarray):
+        """Unit normal n (m, 2) of local node rows P (m, nl, 2), with what its derivative needs: the unit mean
+        direction s^ and |s| (m, 1), and per chord its unit direction and length."""
         dirs = []
+        s = np.zeros((P.shape[0], 2))
         for c in range(self.nchords):
             d = P[:, 2 + 2 * c] - P[:, 1 + 2 * c]
             ld = np.linalg.norm(d, axis=1, keepdims=True)
@@ -376,32 +368,34 @@ class SlidingStrap(StrapSpring):
             s += d / ld
         ls = np.linalg.norm(s, axis=1, keepdims=True)
         sh = s / ls
-        n = np.stack([-sh[:, 1], sh[:, 0]], axis=1)
+        return np.stack([-sh[:, 1], sh[:, 0]], axis=1), sh, ls, dirs
+
+    def _local_force(self, XL: np.ndarray) -> np.ndarray:
+        """Force (m, 2 nl) of local coordinate rows XL (m, 2 nl), node-interleaved in the order of ``dofs``
+        (the actuator node, then each chord's two nodes)."""
+        m = XL.shape[0]
+        g = XL @ self.B.T  # (m, 2)
+        n, sh, ls, dirs = self._normal(XL.reshape(m, -1, 2))
         gn = np.sum(n * g, axis=1, keepdims=True)
-        grad = n @ self.B  # d(n . g)/dXL at fixed n
-        # n's variation: dn = J (I - s^ s^T) ds / |s|, ds = sum_c (I - d^ d^T)(dx_b - dx_a) / |d|
+        G = (n @ self.B).reshape(m, -1, 2)  # d(n . g)/dXL at fixed n, then n's variation:
+        # dn = J (I - s^ s^T) ds / |s|, ds = sum_c (I - d^ d^T)(dx_b - dx_a) / |d|
         Jg = np.stack([g[:, 1], -g[:, 0]], axis=1)  # J^T g
         w = (Jg - sh * np.sum(sh * Jg, axis=1, keepdims=True)) / ls
-        G = grad.reshape(XL.shape[0], -1, 2)
         for c, (dh, ld) in enumerate(dirs):
             v = (w - dh * np.sum(dh * w, axis=1, keepdims=True)) / ld
             G[:, 2 + 2 * c] += v
             G[:, 1 + 2 * c] -= v
         # (t . g)^2 = |g|^2 - (n . g)^2
-        return self.k * ((1.0 - self.beta) * gn * G.reshape(XL.shape[0], -1) + self.beta * g @ self.B)
+        return self.k * ((1.0 - self.beta) * gn * G.reshape(m, -1) + self.beta * g @ self.B)
 
     def normal_gap(self, x: np.ndarray) -> float:
         """The gap across the finger, n . g (mm)."""
         xl = x.T.ravel()[self.dofs]
-        P = xl.reshape(-1, 2)
-        s = sum(
-            (P[2 + 2 * c] - P[1 + 2 * c]) / np.linalg.norm(P[2 + 2 * c] - P[1 + 2 * c]) for c in range(self.nchords)
-        )
-        n = np.array([-s[1], s[0]]) / np.linalg.norm(s)
+        n = self._normal(xl.reshape(1, -1, 2))[0][0]
         return float(n @ (self.B @ xl))
 
     def force(self, x: np.ndarray) -> float:
-        """Strap force magnitude (N, per mm of width in 2D)."""
+        """Strap force magnitude k |(n . g) n + beta (t . g) t| (N, per mm of width in 2D)."""
         gn, g2 = self.normal_gap(x), float(np.sum(self.gap(x) ** 2))
         return self.k * float(np.sqrt(gn**2 + self.beta**2 * max(g2 - gn**2, 0.0)))
 
@@ -416,6 +410,16 @@ class SlidingStrap(StrapSpring):
         K = (fb[: xl.size] - fb[xl.size :]).T / (2 * h)
         r, c = np.meshgrid(self.dofs, self.dofs, indexing="ij")
         return f, sp.csr_matrix((K.ravel(), (r.ravel(), c.ravel())), shape=(self.n, self.n))
+
+
+def strap(ndofs: int, p_ref: np.ndarray, node: int, chords: Sequence[tuple[int, int]], k: float, hold_along: float):
+    """The strap that holds ``hold_along`` (0, 1] of its stiffness along the finger: ``StrapSpring`` at 1 (its exact
+    constant tangent), ``SlidingStrap`` below."""
+    if not 0.0 < hold_along <= 1.0:
+        raise ValueError(f"a strap's hold along the finger must be in (0, 1], got {hold_along!r}")
+    if hold_along == 1.0:
+        return StrapSpring(ndofs, p_ref, node, chords, k)
+    return SlidingStrap(ndofs, p_ref, node, chords, k, hold_along)
 
 
 class DeadLoad:
