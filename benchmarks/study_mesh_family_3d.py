@@ -104,6 +104,12 @@ def solve_ray(refine: int | None, case: str, dim: int = 3, p_kpa=P_KPA, band: fl
     return row
 
 
+def _reached(f: pd.DataFrame, col: str):
+    """(h, values) of the family's meshes that reached the column's pressure, coarse to fine; None below three."""
+    ok = f[col].notna().to_numpy() if col in f else np.zeros(len(f), bool)
+    return (f["h_mm"].to_numpy()[ok], f[col].to_numpy()[ok]) if ok.sum() >= 3 else None
+
+
 def summary(df: pd.DataFrame, p_kpa=P_KPA, dim: int = 3) -> pd.DataFrame:
     """Per case and pressure: the three finest values that reached it, observed order, limit, GCI, default mesh vs
     the limit (2D: refine = 1 is the default mesh)."""
@@ -114,10 +120,10 @@ def summary(df: pd.DataFrame, p_kpa=P_KPA, dim: int = 3) -> pd.DataFrame:
         d = df[(df["refine"] == (1 if dim == 2 else 0)) & (df["case"] == case)]
         for p in p_kpa:
             col = f"{key}_{int(p)}"
-            if col not in f or f[col].notna().sum() < 3:
+            hv = _reached(f, col)
+            if hv is None:
                 continue
-            ok = f[col].notna().to_numpy()
-            h, v = f["h_mm"].to_numpy()[ok][-3:], f[col].to_numpy()[ok][-3:]
+            h, v = hv[0][-3:], hv[1][-3:]
             r = richardson(h, v)
             dflt = float(d[col].iloc[-1]) if len(d) else np.nan
             rows.append(
@@ -155,10 +161,10 @@ def plot_convergence(frames, path: str) -> None:
         for case, key in KEY.items():
             f = fam[fam["case"] == case]
             for col in [c for c in f.columns if c.startswith(key + "_")]:
-                ok = f[col].notna().to_numpy()
-                if ok.sum() < 3:
+                hv = _reached(f, col)
+                if hv is None:
                     continue
-                h, v = f["h_mm"].to_numpy()[ok], f[col].to_numpy()[ok]
+                h, v = hv
                 r = richardson(h[-3:], v[-3:])
                 if not r.asymptotic:
                     continue
