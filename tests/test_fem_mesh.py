@@ -82,7 +82,7 @@ def test_refine_divides_every_element_of_the_base_mesh_into_r_per_direction(dim)
     base = fem.build_unit_mesh(h=4.0, dim=dim)
     for r in (2, 3):
         fine = fem.build_unit_mesh(h=4.0, dim=dim, refine=r)
-        assert fine.refine == r
+        assert fine.refine == (r, r, r)
         assert fine.mesh.t.shape[1] == r**dim * base.mesh.t.shape[1]
         for k in range(dim):
             xb, xf = np.unique(base.mesh.p[k]), np.unique(fine.mesh.p[k])
@@ -92,3 +92,18 @@ def test_refine_divides_every_element_of_the_base_mesh_into_r_per_direction(dim)
         assert paper.sum() == r**dim * (base.material == 1).sum()
     with pytest.raises(ValueError, match="refine"):
         fem.build_unit_mesh(h=4.0, dim=2, refine=0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_refine_per_direction_divides_only_the_directions_asked_for(dim):
+    # (length, height) = (1, 2): the height's intervals and the paper and base layers halved, the length and the
+    # width (3D: as the length) untouched
+    base = fem.build_unit_mesh(h=4.0, dim=dim)
+    fine = fem.build_unit_mesh(h=4.0, dim=dim, refine=(1, 2))
+    assert fine.refine == (1, 2, 1)
+    assert fine.mesh.t.shape[1] == 2 * base.mesh.t.shape[1]
+    assert (fine.material == 1).sum() == 2 * (base.material == 1).sum()
+    counts = [np.unique(m.mesh.p[k]).size - 1 for m in (base, fine) for k in range(dim)]
+    assert counts[dim:] == [counts[0], 2 * counts[1]] + counts[2:dim]
+    with pytest.raises(ValueError, match="refine"):
+        fem.build_unit_mesh(h=4.0, dim=2, refine=(1, 2, 1, 1))

@@ -127,8 +127,9 @@ class UnitMesh:
     chamber_group: tuple[str, ...] = ()
     #: the chain is cut at gap centres (the backbone runs on by half a gap past both end blocks)
     end_gaps: bool = False
-    #: every interval's element count at ``h`` multiplied by this (``build_unit_mesh``)
-    refine: int = 1
+    #: every interval's element count at ``h`` multiplied by this along the length, through the height and across
+    #: the width (``build_unit_mesh``)
+    refine: tuple[int, int, int] = (1, 1, 1)
     _boundary: np.ndarray | None = field(default=None, repr=False)
 
     @property
@@ -245,7 +246,7 @@ def build_unit_mesh(
     paper_layers: int | None = None,
     base_layers: int | None = None,
     end_gaps: bool = False,
-    refine: int = 1,
+    refine: int | Sequence[int] = 1,
 ) -> UnitMesh:
     """Structured mesh of the three-chamber unit.
 
@@ -265,19 +266,30 @@ def build_unit_mesh(
     end_gaps : bool
         Cut the chain at gap centres: the backbone runs on by half a gap past
         both end blocks, as in a unit inside a longer chain.
-    refine : int
+    refine : int or (int, int[, int])
         Every interval's element count, the paper's and the base layers' included, multiplied by this: the
         meshes of one ``h`` and ``refine`` = 1, 2, 3, ... form a systematic family (every element's shape
         kept, its size divided by ``refine``), which meshes of different ``h`` are not (a 2 mm interval
-        gets 1 element at h = 2 and 1.4 mm but 2 at h = 1 mm).
+        gets 1 element at h = 2 and 1.4 mm but 2 at h = 1 mm).  A pair or triple refines the length, the
+        height (the paper and base layers with it) and the width (3D; default: as the length) each by its
+        own factor, to separate the directions' errors (docs/fea.md, "Mesh convergence").
     """
     g = dict(DEFAULT_GEOMETRY)
     g.update(dict(geom or {}))
     npap, nbase = layer_counts(g, h, paper_layers, base_layers)
-    r = int(refine)
-    if r != refine or r < 1:
-        raise ValueError(f"refine must be a positive integer, got {refine!r}")
-    return _chain_mesh(g, h, dim, (r * npap, r * nbase), None, end_gaps, r)
+    r = _refine_factors(refine)
+    return _chain_mesh(g, h, dim, (r[1] * npap, r[1] * nbase), None, end_gaps, r)
+
+
+def _refine_factors(refine) -> tuple[int, int, int]:
+    """(length, height, width) factors of ``refine``: one positive integer for all, or two (width = length) or three."""
+    vals = [refine] if np.isscalar(refine) else list(refine)
+    if not 1 <= len(vals) <= 3 or any(int(v) != v or int(v) < 1 for v in vals):
+        raise ValueError(f"refine must be a positive integer or two or three of them, got {refine!r}")
+    r = [int(v) for v in vals]
+    if len(r) == 1:
+        return (r[0], r[0], r[0])
+    return (r[0], r[1], r[2] if len(r) == 3 else r[0])
 
 
 def build_actuator_mesh(
@@ -319,7 +331,7 @@ def _chain_mesh(
     layers: tuple[int, int],
     groups: tuple[str, ...] | None,
     end_gaps: bool = False,
-    refine: int = 1,
+    refine: tuple[int, int, int] = (1, 1, 1),
 ) -> UnitMesh:
     """Chain of ``g["n_chambers"]`` chambers; ``groups`` (per chamber) adds the actuator's sets.
 
@@ -353,21 +365,22 @@ def _chain_mesh(
         xs.append(L + gap / 2)
     xb = np.array(xs)
     above = np.array([yb, yf, yp, yt]) if yf > yb else np.array([yb, yp, yt])  # breakpoints of one side
-    xc = _divisions(xb, h, refine)
+    rx, ry, rz = refine
+    xc = _divisions(xb, h, rx)
     npap, nbase = layers
     yc = np.concatenate(
         [
-            _divisions(-above[::-1], h, refine),
+            _divisions(-above[::-1], h, ry),
             np.linspace(-yb, -y0, nbase + 1)[1:],
             np.linspace(-y0, y0, npap + 1)[1:],
             np.linspace(y0, yb, nbase + 1)[1:],
-            _divisions(above, h, refine)[1:],
+            _divisions(above, h, ry)[1:],
         ]
     )
     coords = [xc, yc]
     if dim == 3:
         zb = np.array([0.0, g["width"] / 2 - ts, g["width"] / 2])
-        coords.append(_divisions(zb, h, refine))
+        coords.append(_divisions(zb, h, rz))
     pockets = [(k * (d + gap) + tf, k * (d + gap) + d - tf) for k in range(n)]
     gaps = [(k * (d + gap) + d, (k + 1) * (d + gap)) for k in range(n - 1)]
 
@@ -483,7 +496,7 @@ def _chain_mesh(
         contact_surfaces=surfaces,
         chamber_group=tuple(groups or ()),
         end_gaps=bool(end_gaps),
-        refine=int(refine),
+        refine=tuple(int(v) for v in refine),
         contact_parts=part_of,
         _boundary=faces,
     )
