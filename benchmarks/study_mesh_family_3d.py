@@ -23,6 +23,10 @@ nested already (every interval of Table 6 is a whole number of 0.125 mm): the fa
 ``refine`` = 1, 2, 4, 8, r = 1 being the default mesh, figures -> benchmarks/out/mesh_family_2d.csv.  The 2D free
 rays of the finer meshes stop before 300 kPa (docs/fea.md, "Mesh convergence"), so ``--pressures`` sets the rays'
 end and stops (kPa; default 60,180,300), e.g. ``--dim 2 --pressures 5,60 --refine 1,2,4,8 --cases free`` (-> mesh_family_2d_5-60.csv).
+
+``--refine 1x2,2x4,...`` refines the length and the height (the paper and base layers with it) by factors of their
+own, to separate the two directions' errors (figures -> ``..._aniso.csv``; the summary is then a table of the value
+over both factors and each direction's observed order along the finest row and column).
 """
 
 from __future__ import annotations
@@ -49,10 +53,12 @@ P_KPA = (60.0, 180.0, 300.0)
 KEY = {"free": "bending_angle_deg", "blocked": "bending_moment_nm"}
 
 
-def _actuator(band: float | None = None) -> dict:
+def _actuator(band: float | None = None, contact: bool = True) -> dict:
     """The config's actuator section; ``band`` (mm) replaces the contact band and drops the restarts that only
-    widen it, so that every mesh's value is on the same band."""
+    widen it, so that every mesh's value is on the same band; ``contact`` False switches contact off."""
     act = dict(yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["actuator"])
+    if not contact:
+        act["contact"] = dict(act["contact"], enabled=False)
     if band is not None:
         act["contact"] = dict(act["contact"], smoothing_mm=band)
         # every restart keeps its other settings, none changes the band
@@ -62,29 +68,47 @@ def _actuator(band: float | None = None) -> dict:
     return act
 
 
-def _csv(dim: int, p_kpa=P_KPA, band: float | None = None) -> Path:
-    """One CSV per dimension, set of pressures and contact band (rays that differ in these do not share rows)."""
+def _csv(dim: int, p_kpa=P_KPA, band: float | None = None, aniso: bool = False, contact: bool = True) -> Path:
+    """One CSV per dimension, set of pressures and contact band (rays that differ in these do not share rows);
+    ``aniso``: the meshes refined by direction."""
     tail = "" if tuple(p_kpa) == P_KPA else "_" + "-".join(f"{p:g}" for p in p_kpa)
     tail += "" if band is None else f"_band{band:g}"
-    return OUT / f"mesh_family_{dim}d{tail}.csv"
+    tail += "" if contact else "_nocontact"
+    return OUT / f"mesh_family_{dim}d{tail}{'_aniso' if aniso else ''}.csv"
 
 
-def solve_ray(refine: int | None, case: str, dim: int = 3, p_kpa=P_KPA, band: float | None = None) -> dict:
-    """One ray to ``p_kpa[-1]`` landing on the others; ``refine`` None = the config's default mesh (h_3d_mm / h_2d_mm)."""
-    act = _actuator(band)
+def _refine_token(tok: str) -> int | tuple[int, int]:
+    """``"4"`` -> 4 (every direction), ``"1x4"`` -> (1, 4) (along the length x through the height)."""
+    return tuple(int(v) for v in tok.split("x")) if "x" in tok else int(tok)
+
+
+def solve_ray(
+    refine: int | tuple[int, int] | None,
+    case: str,
+    dim: int = 3,
+    p_kpa=P_KPA,
+    band: float | None = None,
+    contact: bool = True,
+) -> dict:
+    """One ray to ``p_kpa[-1]`` landing on the others; ``refine`` None = the config's default mesh (h_3d_mm / h_2d_mm),
+    a pair = (along the length, through the height) factors."""
+    act = _actuator(band, contact)
+    rl, rh = (refine, refine) if not isinstance(refine, tuple) else refine
     if refine is None:
         h = float(act["mesh"][f"h_{dim}d_mm"])
         um = build_unit_mesh(act["geometry"], h=h, dim=dim, **layer_options(act))
     else:
-        h = BASE_H[dim] / refine
+        h = BASE_H[dim] / rl
         um = build_unit_mesh(act["geometry"], h=BASE_H[dim], dim=dim, refine=refine, **layer_options(act))
     stops = tuple(p / p_kpa[-1] for p in p_kpa[:-1])
     t0 = time.perf_counter()
     res = solve_unit_from_config(act, dim, p_kpa[-1], 0.0, case, mesh=um, stops=stops)
     row = {
-        "mesh": "default" if refine is None else f"refine{refine}",
-        "refine": 0 if refine is None else refine,
+        "mesh": "default" if refine is None else f"refine{rl}x{rh}" if isinstance(refine, tuple) else f"refine{rl}",
+        "refine": 0 if refine is None else rl,
+        "refine_height": 0 if refine is None else rh,
         "h_mm": h,
+        "h_height_mm": h if refine is None else BASE_H[dim] / rh,
         "cells": um.mesh.t.shape[1],
         "ndofs": res.ndofs,
         "case": case,
@@ -145,6 +169,30 @@ def summary(df: pd.DataFrame, p_kpa=P_KPA, dim: int = 3) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def direction_table(df: pd.DataFrame, p_kpa=P_KPA) -> str:
+    """Per case and pressure, the value on each (length, height) refinement: rows the height's factor, columns the
+    length's; then each direction's observed order and limit from the three finest factors along it (the other at
+    its finest), where the three are asymptotic."""
+    out = []
+    for case, key in KEY.items():
+        f = df[(df["case"] == case) & (df["refine"] > 0)]
+        for p in p_kpa:
+            col = f"{key}_{int(p)}"
+            if f.empty or col not in f or f[col].notna().sum() == 0:
+                continue
+            tab = f.pivot_table(index="refine_height", columns="refine", values=col)
+            out.append(f"{case}, {p:g} kPa (rows: height factor, columns: length factor)\n{tab.round(5).to_string()}")
+            for name, line in (("height", tab.iloc[:, -1]), ("length", tab.iloc[-1, :])):
+                line = line.dropna()
+                if len(line) >= 3:
+                    r = richardson(BASE_H[2] / line.index.to_numpy()[-3:], line.to_numpy()[-3:])
+                    out.append(
+                        f"  along the {name} (other factor at its finest): order {r.order:.2f}, limit {r.limit:.5f}"
+                        f"{'' if r.asymptotic else ' (not asymptotic)'}"
+                    )
+    return "\n".join(out)
+
+
 def plot_convergence(frames, path: str) -> None:
     """Log-log plot of |value - limit| / |limit| against h per CSV (``frames``: (table, label)), case and pressure,
     the limit from the three finest meshes where they are asymptotic; a slope-1 guide."""
@@ -192,6 +240,7 @@ def main(argv=None) -> None:
     ap.add_argument("--pressures", default="60,180,300", help="kPa: the rays' stops and end (P_B = 0)")
     ap.add_argument("--default", action="store_true", help="also solve the default mesh's rays")
     ap.add_argument("--band", type=float, default=None, help="mm: one contact band for every ray (no band restarts)")
+    ap.add_argument("--no-contact", action="store_true", help="without contact (a comparison, never a choice)")
     ap.add_argument("--summary", action="store_true", help="only print the table from the CSV")
     ap.add_argument("--plot", default=None, help="PNG: each quantity's distance from its Richardson limit against h")
     ap.add_argument(
@@ -199,25 +248,27 @@ def main(argv=None) -> None:
     )
     a = ap.parse_args(argv)
     p_kpa = tuple(float(p) for p in a.pressures.split(","))
-    CSV = _csv(a.dim, p_kpa, a.band)
+    tokens = [_refine_token(t) for t in a.refine.split(",")]
+    aniso = any(isinstance(t, tuple) for t in tokens)
+    CSV = _csv(a.dim, p_kpa, a.band, aniso, not a.no_contact)
     OUT.mkdir(parents=True, exist_ok=True)
     if not a.summary:
         done = pd.read_csv(CSV) if CSV.exists() else pd.DataFrame(columns=["mesh", "case"])
         todo = [(None, c) for c in a.cases.split(",")] if a.default else []
-        todo += [(int(r), c) for r in a.refine.split(",") for c in a.cases.split(",")]
+        todo += [(r, c) for r in tokens for c in a.cases.split(",")]
         for r, case in todo:
-            name = "default" if r is None else f"refine{r}"
+            name = "default" if r is None else f"refine{r[0]}x{r[1]}" if isinstance(r, tuple) else f"refine{r}"
             if ((done["mesh"] == name) & (done["case"] == case)).any():
                 continue
             print(f"{name} {case} ...", flush=True)
-            row = solve_ray(r, case, a.dim, p_kpa, a.band)
+            row = solve_ray(r, case, a.dim, p_kpa, a.band, not a.no_contact)
             print(row, flush=True)
             done = pd.concat([done, pd.DataFrame([row])], ignore_index=True)
             done.to_csv(CSV, index=False)
     df = pd.read_csv(CSV)
     with pd.option_context("display.width", 250, "display.max_columns", 30):
         print(df.drop(columns=["reason"]).to_string(index=False))
-        print(summary(df, p_kpa, a.dim).to_string(index=False))
+        print(direction_table(df, p_kpa) if aniso else summary(df, p_kpa, a.dim).to_string(index=False))
     if a.plot:
 
         def label(stem: str) -> str:  # the band, where the CSV has one
