@@ -134,6 +134,28 @@ def test_direct_solver_halo_takes_a_slave_sliding_to_the_next_facet_without_a_ne
     assert solver.stats["analyses"] == (2 if halo else 3)
 
 
+def test_direct_solver_union_pattern_is_the_sorted_union_of_the_patterns_and_the_halo():
+    """The analysed pattern after a matrix with new entries: old keys, the new ones and their halo, sorted and
+    unique (the merge of sorted keys gives what np.unique of their concatenation gives)."""
+    from workflow.fem import _linsolve
+
+    solver = _linsolve.DirectSolver(max_growth=10.0)
+    if solver._pardiso is None:
+        pytest.skip("pypardiso not installed")
+    A, b = _random_system(300, 2, density=0.02)
+    B = A.tolil()
+    for i, j in ((0, 299), (5, 150), (299, 0), (150, 5), (7, 8)):
+        B[i, j] = 0.1
+    B = B.tocsr()
+    solver.solve(A, b)
+    solver.solve(B, b)
+    ka, kb = _linsolve._keys(A), _linsolve._keys(B)
+    new = kb[~np.isin(kb, ka)]
+    expected = np.unique(np.concatenate([ka, new, _linsolve._halo(B, new)]))
+    np.testing.assert_array_equal(solver._pattern[0], expected)
+    assert solver.stats["analyses"] == 2
+
+
 def test_reduce_matrix_is_the_constraint_product():
     import scipy.sparse as sp
 

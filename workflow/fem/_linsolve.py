@@ -124,10 +124,14 @@ class DirectSolver:
         keys = akeys
         if union and self._pattern is not None and self._pattern[1].size == n + 1:
             old = self._pattern[0]
-            extra = akeys[~np.isin(akeys, old, assume_unique=True)]
+            extra = akeys[~_in_sorted(akeys, old)]
             if self.halo:
                 extra = np.concatenate([extra, _halo(A, extra)])
-            joined = np.unique(np.concatenate([old, extra]))
+            # both sorted: merge the few new keys into the old ones (np.unique of the whole union sorted
+            # ~10^6 keys at every analysis, a fifth of a 3D ray's time)
+            extra = np.unique(extra)
+            extra = extra[~_in_sorted(extra, old)]
+            joined = np.insert(old, np.searchsorted(old, extra), extra)
             if joined.size <= self.max_growth * akeys.size:
                 keys = joined
         indptr = np.searchsorted(keys // n, np.arange(n + 1)).astype(np.int32)
@@ -162,6 +166,14 @@ class DirectSolver:
     def _accurate(self, A: sp.csr_matrix, x: np.ndarray, b: np.ndarray) -> bool:
         res = np.linalg.norm(A @ x - b)
         return bool(np.isfinite(res) and res <= self.check_rtol * np.linalg.norm(b))
+
+
+def _in_sorted(a: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """Mask of the entries of ``a`` found in the sorted array ``sorted_keys``."""
+    if not sorted_keys.size:
+        return np.zeros(a.shape, bool)
+    pos = np.minimum(np.searchsorted(sorted_keys, a), sorted_keys.size - 1)
+    return sorted_keys[pos] == a
 
 
 def _halo(A: sp.csr_matrix, keys: np.ndarray) -> np.ndarray:
