@@ -77,9 +77,22 @@ def _csv(dim: int, p_kpa=P_KPA, band: float | None = None, aniso: bool = False, 
     return OUT / f"mesh_family_{dim}d{tail}{'_aniso' if aniso else ''}.csv"
 
 
-def _refine_token(tok: str) -> int | tuple[int, int]:
-    """``"4"`` -> 4 (every direction), ``"1x4"`` -> (1, 4) (along the length x through the height)."""
-    return tuple(int(v) for v in tok.split("x")) if "x" in tok else int(tok)
+def _refine_token(tok: str) -> int | tuple[int, ...]:
+    """``"4"`` -> 4 (every direction), ``"1x4"`` -> (1, 4) (along the length x through the height; 3D: the width
+    as the length), ``"2x4x4"`` -> (2, 4, 4) (3D: length x height x width)."""
+    if "x" not in tok:
+        return int(tok)
+    r = tuple(int(v) for v in tok.split("x"))
+    if len(r) not in (2, 3):
+        raise SystemExit(f"--refine token {tok!r}: one factor, or length x height [x width]")
+    return r
+
+
+def _mesh_name(refine) -> str:
+    """CSV name of a mesh: ``default``, ``refine4`` or ``refine1x4`` / ``refine2x4x4``."""
+    if refine is None:
+        return "default"
+    return "refine" + ("x".join(str(v) for v in refine) if isinstance(refine, tuple) else str(refine))
 
 
 def solve_ray(
@@ -93,7 +106,7 @@ def solve_ray(
     """One ray to ``p_kpa[-1]`` landing on the others; ``refine`` None = the config's default mesh (h_3d_mm / h_2d_mm),
     a pair = (along the length, through the height) factors."""
     act = _actuator(band, contact)
-    rl, rh = (refine, refine) if not isinstance(refine, tuple) else refine
+    rl, rh, rw = (refine,) * 3 if not isinstance(refine, tuple) else (*refine[:2], refine[2 if len(refine) == 3 else 0])
     if refine is None:
         h = float(act["mesh"][f"h_{dim}d_mm"])
         um = build_unit_mesh(act["geometry"], h=h, dim=dim, **layer_options(act))
@@ -104,9 +117,10 @@ def solve_ray(
     t0 = time.perf_counter()
     res = solve_unit_from_config(act, dim, p_kpa[-1], 0.0, case, mesh=um, stops=stops)
     row = {
-        "mesh": "default" if refine is None else f"refine{rl}x{rh}" if isinstance(refine, tuple) else f"refine{rl}",
+        "mesh": _mesh_name(refine),
         "refine": 0 if refine is None else rl,
         "refine_height": 0 if refine is None else rh,
+        "refine_width": 0 if refine is None else rw,
         "h_mm": h,
         "h_height_mm": h if refine is None else BASE_H[dim] / rh,
         "cells": um.mesh.t.shape[1],
@@ -169,7 +183,7 @@ def summary(df: pd.DataFrame, p_kpa=P_KPA, dim: int = 3) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def direction_table(df: pd.DataFrame, p_kpa=P_KPA) -> str:
+def direction_table(df: pd.DataFrame, p_kpa=P_KPA, dim: int = 2) -> str:
     """Per case and pressure, the value on each (length, height) refinement: rows the height's factor, columns the
     length's; then each direction's observed order and limit from the three finest factors along it (the other at
     its finest), where the three are asymptotic."""
@@ -185,7 +199,7 @@ def direction_table(df: pd.DataFrame, p_kpa=P_KPA) -> str:
             for name, line in (("height", tab.iloc[:, -1]), ("length", tab.iloc[-1, :])):
                 line = line.dropna()
                 if len(line) >= 3:
-                    r = richardson(BASE_H[2] / line.index.to_numpy()[-3:], line.to_numpy()[-3:])
+                    r = richardson(BASE_H[dim] / line.index.to_numpy()[-3:], line.to_numpy()[-3:])
                     out.append(
                         f"  along the {name} (other factor at its finest): order {r.order:.2f}, limit {r.limit:.5f}"
                         f"{'' if r.asymptotic else ' (not asymptotic)'}"
@@ -257,7 +271,7 @@ def main(argv=None) -> None:
         todo = [(None, c) for c in a.cases.split(",")] if a.default else []
         todo += [(r, c) for r in tokens for c in a.cases.split(",")]
         for r, case in todo:
-            name = "default" if r is None else f"refine{r[0]}x{r[1]}" if isinstance(r, tuple) else f"refine{r}"
+            name = _mesh_name(r)
             if ((done["mesh"] == name) & (done["case"] == case)).any():
                 continue
             print(f"{name} {case} ...", flush=True)
@@ -268,7 +282,11 @@ def main(argv=None) -> None:
     df = pd.read_csv(CSV)
     with pd.option_context("display.width", 250, "display.max_columns", 30):
         print(df.drop(columns=["reason"]).to_string(index=False))
-        print(direction_table(df, p_kpa) if aniso else summary(df, p_kpa, a.dim).to_string(index=False))
+        print(direction_table(df, p_kpa, a.dim) if aniso else summary(df, p_kpa, a.dim).to_string(index=False))
+    if a.plot and aniso:
+        raise SystemExit(
+            "--plot draws a family refined in every direction; the meshes refined by direction have a table"
+        )
     if a.plot:
 
         def label(stem: str) -> str:  # the band, where the CSV has one

@@ -105,5 +105,6 @@ def test_refine_per_direction_divides_only_the_directions_asked_for(dim):
     assert (fine.material == 1).sum() == 2 * (base.material == 1).sum()
     counts = [np.unique(m.mesh.p[k]).size - 1 for m in (base, fine) for k in range(dim)]
     assert counts[dim:] == [counts[0], 2 * counts[1]] + counts[2:dim]
-    with pytest.raises(ValueError, match="refine"):
-        fem.build_unit_mesh(h=4.0, dim=2, refine=(1, 2, 1, 1))
+    for bad in ((1, 2, 1, 1), True, (1, 0)):
+        with pytest.raises(ValueError, match="refine"):
+            fem.build_unit_mesh(h=4.0, dim=2, refine=bad)

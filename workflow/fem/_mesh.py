@@ -283,8 +283,8 @@ def build_unit_mesh(
 
 def _refine_factors(refine) -> tuple[int, int, int]:
     """(length, height, width) factors of ``refine``: one positive integer for all, or two (width = length) or three."""
-    vals = [refine] if np.isscalar(refine) else list(refine)
-    if not 1 <= len(vals) <= 3 or any(int(v) != v or int(v) < 1 for v in vals):
+    vals = [refine] if np.ndim(refine) == 0 else list(refine)
+    if not 1 <= len(vals) <= 3 or any(isinstance(v, bool) or int(v) != v or int(v) < 1 for v in vals):
         raise ValueError(f"refine must be a positive integer or two or three of them, got {refine!r}")
     r = [int(v) for v in vals]
     if len(r) == 1:
