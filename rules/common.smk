@@ -342,6 +342,11 @@ def get_fem_choice_slice():
 FEM_CASES = [c.name for c in fidelity_choice.fem_cases(config["fidelity"]["fem_cases"])]
 
 
+def fem_case_priority(wildcards):
+    """Queue priority of an FE study case: the longest first (workflow.common.fidelity_choice.queue_priority)."""
+    return fidelity_choice.queue_priority(fidelity_choice.FemCase.parse(wildcards.case))
+
+
 def fidelity_auto():
     return bool(config["fidelity"]["auto"])
 

@@ -6,6 +6,7 @@
 # and entry_fem.py (the FE cases, on their own so judging the study does not rerun its FEA).
 # Input functions live in rules/common.smk:
 #   FEM_CASES               -> the FE unit cases of fidelity.fem_cases (names)
+#   fem_case_priority(wc)   -> a case's queue priority, the longest case first
 #   get_fem_choice(wc)      -> {"fidelity": results/fidelity/fem.nc} when fidelity.auto, else {}
 #   get_msk_choice(wc)      -> the musculoskeletal study (+ OpenSim model) when fidelity.auto
 #   get_check_choice(wc)    -> the patient's check study when fidelity.auto
@@ -22,8 +23,9 @@ rule fidelity_fem:
         "results/benchmarks/rules/fidelity_fem_{case}.tsv"
     wildcard_constraints:
         case=r"fem_(2d|3d)_h[0-9.]+_(contact|nocontact)",
-    # first in the queue: every sweep waits for the study's mesh choice, so its cases are the cold run's critical path
-    priority: 10
+    # first in the queue, the longest case first: every sweep waits for the study's mesh choice, so its cases are
+    # the cold run's critical path
+    priority: fem_case_priority
     conda:
         "../envs/project.yaml"
     params:
