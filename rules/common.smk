@@ -7,7 +7,7 @@ from snakemake.utils import validate
 
 from workflow import settings
 from workflow.authors_study import settings as authors_settings
-from workflow.common import fidelity_choice
+from workflow.common import fidelity_choice, scheduling
 from workflow.common.provenance import code_files, config_sha256
 
 validate(config, "../config/schema.yaml")
@@ -343,8 +343,8 @@ FEM_CASES = [c.name for c in fidelity_choice.fem_cases(config["fidelity"]["fem_c
 
 
 def fem_case_priority(wildcards):
-    """Queue priority of an FE study case: the longest first (workflow.common.fidelity_choice.queue_priority)."""
-    return fidelity_choice.queue_priority(fidelity_choice.FemCase.parse(wildcards.case))
+    """Queue priority of an FE study case: the longest first (workflow.common.scheduling)."""
+    return scheduling.fem_case_priority(fidelity_choice.FemCase.parse(wildcards.case))
 
 
 def fidelity_auto():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from workflow.common import fidelity_choice
+from workflow.common import fidelity_choice, scheduling
 from workflow.fidelity import analysis as FD
 from workflow.fidelity.entry import fem_table
 
@@ -40,7 +40,7 @@ def test_fem_case_queue_priority_starts_the_longest_cases_first_and_before_every
         "fem_2d_h0.5_nocontact",
         "fem_2d_h1_nocontact",
     ]
-    prio = [fidelity_choice.queue_priority(fidelity_choice.FemCase.parse(n)) for n in names]
+    prio = [scheduling.fem_case_priority(fidelity_choice.FemCase.parse(n)) for n in names]
     assert prio == sorted(prio, reverse=True) and len(set(prio)) == len(prio)
     assert min(prio) > 10
 

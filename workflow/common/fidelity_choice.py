@@ -18,7 +18,6 @@ import xarray as xr
 __all__ = [
     "FemCase",
     "fem_cases",
-    "queue_priority",
     "case_actuator",
     "Choice",
     "cheapest_within",
@@ -46,14 +45,6 @@ class FemCase:
         if m is None:
             raise ValueError(f"not an FE case name: {name!r} (expected e.g. fem_2d_h1_contact)")
         return cls(m.group(1), float(m.group(2)), m.group(3) == "contact")
-
-
-def queue_priority(case: FemCase) -> int:
-    """Snakemake priority of a case's job: the longer it runs, the earlier it starts (3D before 2D, finer before
-    coarser, contact before none), all above 10 so that the study, which every sweep waits for, runs first.  A cold
-    run's 3D 1 mm case takes about 16 min, the 1.4 mm one 6, every 2D case under 3: started last, the longest case
-    left one core idle while it ran alone."""
-    return 10 + (100 if case.model == "3d" else 0) + int(round((10.0 if case.contact else 1.0) / case.h_mm))
 
 
 def fem_cases(spec: Sequence[Mapping]) -> list[FemCase]:
