@@ -106,21 +106,21 @@ def solve_ray(
     """One ray to ``p_kpa[-1]`` landing on the others; ``refine`` None = the config's default mesh (h_3d_mm / h_2d_mm),
     a pair = (along the length, through the height) factors."""
     act = _actuator(band, contact)
-    rl, rh, rw = (refine,) * 3 if not isinstance(refine, tuple) else (*refine[:2], refine[2 if len(refine) == 3 else 0])
     if refine is None:
         h = float(act["mesh"][f"h_{dim}d_mm"])
         um = build_unit_mesh(act["geometry"], h=h, dim=dim, **layer_options(act))
     else:
-        h = BASE_H[dim] / rl
         um = build_unit_mesh(act["geometry"], h=BASE_H[dim], dim=dim, refine=refine, **layer_options(act))
+        h = BASE_H[dim] / um.refine[0]
+    rl, rh, rw = (0, 0, 0) if refine is None else um.refine  # the mesh's own (length, height, width) factors
     stops = tuple(p / p_kpa[-1] for p in p_kpa[:-1])
     t0 = time.perf_counter()
     res = solve_unit_from_config(act, dim, p_kpa[-1], 0.0, case, mesh=um, stops=stops)
     row = {
         "mesh": _mesh_name(refine),
-        "refine": 0 if refine is None else rl,
-        "refine_height": 0 if refine is None else rh,
-        "refine_width": 0 if refine is None else rw,
+        "refine": rl,
+        "refine_height": rh,
+        "refine_width": rw,
         "h_mm": h,
         "h_height_mm": h if refine is None else BASE_H[dim] / rh,
         "cells": um.mesh.t.shape[1],

@@ -109,10 +109,8 @@ class DirectSolver:
         last = self._last
         if last is not None and np.array_equal(A.indptr, last[0]) and np.array_equal(A.indices, last[1]):
             return last[2]
-        keys = self._pattern[0]
-        akeys = _keys(A)
-        pos = np.minimum(np.searchsorted(keys, akeys), keys.size - 1)
-        if not np.array_equal(keys[pos], akeys):
+        pos, found = _find_sorted(_keys(A), self._pattern[0])
+        if not found.all():
             return None
         self._last = (A.indptr.copy(), A.indices.copy(), pos)
         return pos
@@ -168,12 +166,17 @@ class DirectSolver:
         return bool(np.isfinite(res) and res <= self.check_rtol * np.linalg.norm(b))
 
 
+def _find_sorted(a: np.ndarray, sorted_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of the entries of ``a`` in the sorted array ``sorted_keys`` and the mask of those found there."""
+    if not sorted_keys.size:
+        return np.zeros(a.shape, np.int64), np.zeros(a.shape, bool)
+    pos = np.minimum(np.searchsorted(sorted_keys, a), sorted_keys.size - 1)
+    return pos, sorted_keys[pos] == a
+
+
 def _in_sorted(a: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
     """Mask of the entries of ``a`` found in the sorted array ``sorted_keys``."""
-    if not sorted_keys.size:
-        return np.zeros(a.shape, bool)
-    pos = np.minimum(np.searchsorted(sorted_keys, a), sorted_keys.size - 1)
-    return sorted_keys[pos] == a
+    return _find_sorted(a, sorted_keys)[1]
 
 
 def _halo(A: sp.csr_matrix, keys: np.ndarray) -> np.ndarray:
