@@ -239,7 +239,7 @@ def main(argv=None) -> int:
     last = records[-1]
     out = {
         "h_mm": args.h,
-        "smoothing_mm": args.smoothing if args.smoothing is not None else fem.DEFAULT_CONTACT["smoothing_mm"],
+        "smoothing_mm": args.smoothing if args.smoothing is not None else fem.contact_band(fem.DEFAULT_CONTACT, 2),
         "p_top_kpa": args.p,
         "contact": not args.no_contact,
         "paper_e_mpa": args.paper_e,

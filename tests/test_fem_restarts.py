@@ -2,7 +2,10 @@
 
 from types import SimpleNamespace
 
+import pytest
+
 from workflow import fem
+from workflow.fem._unit import self_contact_pairs
 
 RESTARTS = [{"contact": {"smoothing_mm": 0.05}}, {"solver": {"predictor": False, "max_step": 0.02}}]
 
@@ -124,3 +127,17 @@ def test_a_long_path_logs_its_progress(monkeypatch, caplog):
     said = [r.getMessage() for r in caplog.records if r.name == "workflow.fem._solve"]
     assert len(said) == len(res.history) >= 1
     assert said[0].startswith("load ") and "Newton iterations" in said[0]
+
+
+def test_the_contact_band_is_one_per_model_and_a_restart_band_widens_both():
+    per_model = {"smoothing_mm": {"2d": 0.01, "3d": 0.02}}
+    assert (fem.contact_band(per_model, 2), fem.contact_band(per_model, 3)) == (0.01, 0.02)
+    assert fem.contact_band({}, 3) == fem.contact_band(fem.DEFAULT_CONTACT, 3) == 0.02
+    restart = fem.separate_attempts(per_model, {}, RESTARTS)[1][0]
+    assert (fem.contact_band(restart, 2), fem.contact_band(restart, 3)) == (0.05, 0.05)
+    with pytest.raises(ValueError, match="no band for the 3d model"):
+        fem.contact_band({"smoothing_mm": {"2d": 0.01}}, 3)
+    # the unit's contact pairs take the band of their own model
+    for dim, band in ((2, 0.01), (3, 0.02)):
+        um = fem.build_unit_mesh(None, h=2.0, dim=dim)
+        assert {p.smoothing for p in self_contact_pairs(um, per_model)} == {band}

@@ -13,7 +13,7 @@ from workflow.common.runlog import solved
 
 from ._mesh import build_unit_mesh
 from ._restarts import first_converged, separate_attempts
-from ._unit import DEFAULT_CONTACT, DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, solve_unit
+from ._unit import DEFAULT_END_HOLD, DEFAULT_FORMULATION, UnitResult, contact_band, solve_unit
 
 __all__ = ["DEFAULT_RESTARTS", "layer_options", "unit_mesh_from_config", "solve_unit_from_config", "unit_check"]
 
@@ -34,7 +34,7 @@ def unit_mesh_from_config(actuator: Mapping, dim: int):
 
 
 #: Restarts from zero load of a ray that stalls, tried in order (overrides of ``actuator``): a wider
-#: contact regularisation band (0.05, 0.1 mm instead of 0.01 mm) or smaller steps without predictor
+#: contact regularisation band (0.05, 0.1 mm instead of 0.01 mm in 2D and 0.02 mm in 3D) or smaller steps without predictor
 #: often pass a contact event (blocks meeting corner to corner) where the first try cycled. The band
 #: moves the free angle by under 1 % (2D, h = 1 and 2 mm, 60-300 kPa), below the fidelity tolerance.
 DEFAULT_RESTARTS = (
@@ -91,7 +91,7 @@ def solve_unit_from_config(
             solver=solver,
             **kwargs,
         )
-        res.contact_smoothing_mm = float(opts.get("smoothing_mm", DEFAULT_CONTACT["smoothing_mm"]))
+        res.contact_smoothing_mm = contact_band(opts, dim)
         spent += res.wall_time_s
         used += res.newton_iterations
         return res

@@ -54,6 +54,7 @@ from workflow.fem._solve import DEFAULT_SOLVER, Model, solve_path
 from workflow.fem._unit import (
     DEFAULT_CONTACT,
     DEFAULT_FORMULATION,
+    contact_band,
     contact_penalty,
     self_contact_pairs,
     solid_assembler,
@@ -277,7 +278,7 @@ def coupled_model(
         y0 = float(p[1, skin[np.argmin(p[0, skin])]])
         nodes, area = tributary_areas(p, cm.um.facets["outer_bottom"])
         over = p[0, nodes] < mcp[0] - 1e-9
-        hand = SupportPlane(n, nodes[over], area[over], y0, eps, c["smoothing_mm"])
+        hand = SupportPlane(n, nodes[over], area[over], y0, eps, contact_band(c, 2))
         extras.append(hand)
     if setup.gravity is not None:
         extras.append(DeadLoad(setup.gravity, ramp=gravity_ramp))
@@ -286,7 +287,7 @@ def coupled_model(
     fac = float(c["finger_penalty"]) / eps  # own penalty (see the module docstring)
     # the skin under a gap between two blocks touches both blocks' corners (sum_extensions)
     finger_pairs = [
-        ContactPair(p, a, b, c["search_mm"], c["extend"], c["smoothing_mm"], penalty_factor=fac, sum_extensions=True)
+        ContactPair(p, a, b, c["search_mm"], c["extend"], contact_band(c, 2), penalty_factor=fac, sum_extensions=True)
         for a, b in ((skin, bottom), (bottom, skin))
     ]
     model = Model(
