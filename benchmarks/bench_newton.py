@@ -14,15 +14,20 @@ With ``--compare-lag`` each ray at the default tolerance runs twice in one run, 
 initial-stress pressure taken from the actual element volume and from the lagged (linearised) one (the default,
 ``workflow.fem._assembly.LAGGED_PRESSURE``), the 3D blocked ray added: same values, and the ratio of the two times.
 
+With ``--compare-band`` the 3D rays (h = 1.4 mm, the FE study's pick, and 2 mm; free and blocked) run on the
+0.01 mm contact band (2D's, and 3D's before) and on the 3D default (0.02 mm), the two of a pair at once in two
+processes (one core each): iterations, the values and their change, and the time ratio.
+
 With ``--compare-search`` the 3D rays (h = 2 mm free and blocked, h = 1.4 mm blocked) run twice in one run, with
 and without the two savings that leave the path unchanged: the 3D contact search skipping slaves out of reach of
 every facet (``workflow.fem._contact.REACH_FILTER``) and PARDISO's analysed pattern widened by a halo round new
 entries (``DirectSolver.halo``): same values, the time ratio and the analyses.
 
 Each case runs in its own process with one BLAS / MKL thread.  Results: ``benchmarks/out/bench_newton.{json,md}``
-(``bench_newton_lag.{json,md}`` with ``--compare-lag``, ``bench_newton_search.{json,md}`` with ``--compare-search``).
+(``bench_newton_lag.{json,md}`` with ``--compare-lag``, ``bench_newton_search.{json,md}`` with ``--compare-search``,
+``bench_newton_band.{json,md}`` with ``--compare-band``).
 
-    python benchmarks/bench_newton.py [--no-3d] [--compare-lag | --compare-search]
+    python benchmarks/bench_newton.py [--no-3d] [--compare-lag | --compare-search | --compare-band]
 """
 
 from __future__ import annotations
@@ -51,7 +56,9 @@ TARGETS = {
 }
 
 
-def _case(dim: int, h: float, case: str, solver: dict, lag: bool | None, queue, search: bool | None = None) -> None:
+def _case(
+    dim: int, h: float, case: str, solver: dict, lag: bool | None, queue, search: bool | None = None, band=None
+) -> None:
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"
     from workflow import fem
@@ -64,7 +71,10 @@ def _case(dim: int, h: float, case: str, solver: dict, lag: bool | None, queue, 
         _linsolve.default_solver.halo = search
 
     t0 = time.perf_counter()
-    res = fem.solve_unit({"dim": dim, "h": h}, 300.0, 0.0, case=case, contact=True, solver=solver, stops=STOPS)
+    copts = None if band is None else {"smoothing_mm": band}
+    res = fem.solve_unit(
+        {"dim": dim, "h": h}, 300.0, 0.0, case=case, contact=True, contact_options=copts, solver=solver, stops=STOPS
+    )
     wall = time.perf_counter() - t0
     key = "bending_angle_deg" if case == "free" else "bending_moment_nm"
     at = {round(300.0 * hh["lam"]): hh[key] for hh in res.history if any(abs(hh["lam"] - s) < 1e-9 for s in STOPS)}
@@ -78,6 +88,7 @@ def _case(dim: int, h: float, case: str, solver: dict, lag: bool | None, queue, 
             "case": case,
             "lagged_pressure": bool(_assembly.LAGGED_PRESSURE),
             "rtol": solver.get("rtol", fem.DEFAULT_SOLVER["rtol"]),
+            "band_mm": fem.contact_band({} if copts is None else copts, dim),
             "status": int(res.status),
             "load_factor": float(res.load_factor),
             "steps": len(res.history),
@@ -107,6 +118,46 @@ def run_case(
     proc.join()
     print(json.dumps(out), flush=True)
     return out
+
+
+def run_side_by_side(dim: int, h: float, case: str, bands: tuple) -> list[dict]:
+    """One ray per contact band, each in its own process, all at once (one core each): same machine load."""
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    procs = [ctx.Process(target=_case, args=(dim, h, case, {}, None, q, None, b)) for b in bands]
+    for p in procs:
+        p.start()
+    out = sorted((q.get() for _ in procs), key=lambda r: r["band_mm"])
+    for p in procs:
+        p.join()
+    for r in out:
+        print(json.dumps(r), flush=True)
+    return out
+
+
+def _band_markdown(rows: list[dict]) -> str:
+    lines = [
+        "| case | band (mm) | reached | steps | cut-backs | iterations (all attempts) | median it./step | wall s "
+        "| value at 60 / 180 / 300 kPa | change against the narrowest band | time ratio against it |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    first = {}
+    for r in rows:
+        key = (r["dim"], r["h_mm"], r["case"])
+        ref = first.setdefault(key, r)
+        vals = [r["value_at_kpa"].get(p) for p in ("60", "180", "300")]
+        refs = [ref["value_at_kpa"].get(p) for p in ("60", "180", "300")]
+        change = " / ".join(
+            "" if v is None or v0 is None else f"{100 * (v - v0) / abs(v0):+.2f} %" for v, v0 in zip(vals, refs)
+        )
+        ratio = "" if r is ref else f"{r['wall_s'] / ref['wall_s']:.2f}"
+        values = " / ".join("stopped" if v is None else f"{v:.6g}" for v in vals)
+        lines.append(
+            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | {r['band_mm']:g} | {100 * r['load_factor']:.0f} % | "
+            f"{r['steps']} | {r['cutbacks']} | {r['iterations_accepted']} ({r['iterations_all']}) | "
+            f"{r['median_iterations']:g} | {r['wall_s']:.1f} | {values} | {'' if r is ref else change} | {ratio} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _markdown(rows: list[dict]) -> str:
@@ -187,8 +238,17 @@ def main(argv=None) -> int:
     ap.add_argument("--no-3d", action="store_true", help="leave out the 3D rays")
     ap.add_argument("--compare-lag", action="store_true", help="each ray with the actual and the lagged pressure")
     ap.add_argument("--compare-search", action="store_true", help="3D rays with and without the search savings")
+    ap.add_argument(
+        "--compare-band",
+        action="store_true",
+        help="3D rays at 1.4 and 2 mm on the 0.01 mm band and the 3D default, side by side",
+    )
     args = ap.parse_args(argv)
     rows = []
+    if args.compare_band:
+        for h, case in ((1.4, "free"), (1.4, "blocked"), (2.0, "free"), (2.0, "blocked")):
+            rows += run_side_by_side(3, h, case, (0.01, None))  # None: the 3D default band
+        return _write("bench_newton_band", {"targets": TARGETS, "rows": rows}, _band_markdown(rows))
     if args.compare_search:
         for dim, h, case in ((3, 2.0, "blocked"), (3, 2.0, "free"), (3, 1.4, "blocked")):
             for search in (False, True):

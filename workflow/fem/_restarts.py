@@ -21,6 +21,14 @@ log = logging.getLogger(__name__)
 R = TypeVar("R")
 
 
+def _band(contact: Mapping) -> str:
+    """The contact band of an attempt for the log: one number, or one per model."""
+    band = contact.get("smoothing_mm", "default")
+    if isinstance(band, Mapping):
+        return " / ".join(f"{k} {v:g}" for k, v in band.items())
+    return f"{band:g}" if isinstance(band, (int, float)) else str(band)
+
+
 def _over(base: Mapping, override: Mapping) -> dict:
     return {**dict(base), **dict(override)}
 
@@ -66,7 +74,7 @@ def first_converged(
             "%s: attempt %d (band %s mm, %s) stopped at %.0f %% (%s)",
             label,
             k + 1,
-            contact.get("smoothing_mm", "default"),
+            _band(contact),
             {key: v for key, v in solver.items() if key in ("predictor", "max_step")} or "configured steps",
             100 * res.load_factor,
             getattr(res, "reason", ""),
