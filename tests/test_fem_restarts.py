@@ -141,3 +141,11 @@ def test_the_contact_band_is_one_per_model_and_a_restart_band_widens_both():
     for dim, band in ((2, 0.01), (3, 0.02)):
         um = fem.build_unit_mesh(None, h=2.0, dim=dim)
         assert {p.smoothing for p in self_contact_pairs(um, per_model)} == {band}
+
+
+def test_a_step_grows_after_fewer_newton_iterations_in_3d_than_in_2d_unless_configured():
+    from workflow.fem._solve import grow_below_iter
+
+    assert grow_below_iter(fem.DEFAULT_SOLVER, 2) == 6
+    assert grow_below_iter(fem.DEFAULT_SOLVER, 3) == 8
+    assert grow_below_iter({"grow_below_iter": 10}, 2) == grow_below_iter({"grow_below_iter": 10}, 3) == 10
