@@ -34,7 +34,7 @@ rule fea_check:
         "logs/fea_check/fea_check/{patient}.log",
     benchmark:
         "results/benchmarks/rules/fea_check_{patient}.tsv"
-    priority: 5  # the run's last jobs: ahead of the studies that nothing waits for
+    priority: scheduling.CHECK_PRIORITY  # the run's last jobs (workflow/common/scheduling.py)
     conda:
         "../envs/project.yaml"
     params:

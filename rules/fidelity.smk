@@ -96,9 +96,8 @@ rule fidelity_check:
         "logs/fidelity/fidelity_check/{patient}.log",
     benchmark:
         "results/benchmarks/rules/fidelity_check_{patient}.tsv"
-    # ahead of the unit stiffness study and the stand-alone exercises, which become ready with it: the FEA
-    # checks, the run's last jobs, wait for this mesh choice (simulated on a cold run's job times: 37.0 min, not 38.9)
-    priority: 5
+    # the FEA checks, the run's last jobs, wait for this mesh choice (workflow/common/scheduling.py)
+    priority: scheduling.CHECK_PRIORITY
     conda:
         "../envs/project.yaml"
     params:

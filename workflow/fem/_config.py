@@ -34,8 +34,8 @@ def unit_mesh_from_config(actuator: Mapping, dim: int):
 
 
 #: Restarts from zero load of a ray that stalls, tried in order (overrides of ``actuator``): a wider
-#: contact regularisation band (0.05, 0.1 mm instead of 0.01 mm in 2D and 0.02 mm in 3D) or smaller steps without predictor
-#: often pass a contact event (blocks meeting corner to corner) where the first try cycled. The band
+#: contact regularisation band (0.05, 0.1 mm instead of 0.01 mm in 2D and 0.02 mm in 3D) or smaller steps
+#: without predictor often pass a contact event (blocks meeting corner to corner) where the first try cycled. The band
 #: moves the free angle by under 1 % (2D, h = 1 and 2 mm, 60-300 kPa), below the fidelity tolerance.
 DEFAULT_RESTARTS = (
     {"contact": {"smoothing_mm": 0.05}},
