@@ -23,11 +23,17 @@ and without the two savings that leave the path unchanged: the 3D contact search
 every facet (``workflow.fem._contact.REACH_FILTER``) and PARDISO's analysed pattern widened by a halo round new
 entries (``DirectSolver.halo``): same values, the time ratio and the analyses.
 
+With ``--compare-tolerance`` the 3D rays (h = 1.4 and 2 mm, free and blocked) run at the residual tolerance
+rtol = 1e-6 (2D's, and 3D's before) beside the 3D default (rtol = 1e-2 and the increment test at 1e-2), then at
+rtol = 1e-4 beside the paper's 0.03 on residual and increment, each pair at once: the values and their change
+against 1e-6, and each pair's time ratio.
+
 Each case runs in its own process with one BLAS / MKL thread.  Results: ``benchmarks/out/bench_newton.{json,md}``
 (``bench_newton_lag.{json,md}`` with ``--compare-lag``, ``bench_newton_search.{json,md}`` with ``--compare-search``,
-``bench_newton_band.{json,md}`` with ``--compare-band``).
+``bench_newton_band.{json,md}`` with ``--compare-band``, ``bench_newton_tolerance.{json,md}`` with
+``--compare-tolerance``).
 
-    python benchmarks/bench_newton.py [--no-3d] [--compare-lag | --compare-search | --compare-band]
+    python benchmarks/bench_newton.py [--no-3d] [--compare-lag | --compare-search | --compare-band | --compare-tolerance]
 """
 
 from __future__ import annotations
@@ -62,8 +68,10 @@ def _case(
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"
     from workflow import fem
-    from workflow.fem import _assembly, _contact, _linsolve
+    from workflow.fem import _assembly, _contact, _linsolve, _solve
 
+    solver = dict(solver)
+    tag = solver.pop("tag", None)  # the ray's place in a side-by-side run
     if lag is not None:
         _assembly.LAGGED_PRESSURE = lag
     if search is not None:
@@ -83,11 +91,13 @@ def _case(
     its = [int(hh["iterations"]) for hh in res.history]
     queue.put(
         {
+            "tag": tag,
             "dim": dim,
             "h_mm": h,
             "case": case,
             "lagged_pressure": bool(_assembly.LAGGED_PRESSURE),
-            "rtol": solver.get("rtol", fem.DEFAULT_SOLVER["rtol"]),
+            "rtol": _solve.tolerances({**fem.DEFAULT_SOLVER, **solver}, dim)[0],
+            "utol": _solve.tolerances({**fem.DEFAULT_SOLVER, **solver}, dim)[1],
             "band_mm": fem.contact_band({} if copts is None else copts, dim),
             "status": int(res.status),
             "load_factor": float(res.load_factor),
@@ -133,6 +143,54 @@ def run_side_by_side(dim: int, h: float, case: str, bands: tuple) -> list[dict]:
     for r in out:
         print(json.dumps(r), flush=True)
     return out
+
+
+def run_pair(dim: int, h: float, case: str, solvers: tuple) -> list[dict]:
+    """One ray per solver setting, each in its own process, all at once (one core each), in the order given."""
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    procs = [ctx.Process(target=_case, args=(dim, h, case, dict(s, tag=i), None, q)) for i, s in enumerate(solvers)]
+    for p in procs:
+        p.start()
+    out = sorted((q.get() for _ in procs), key=lambda r: r["tag"])
+    for p in procs:
+        p.join()
+    for r in out:
+        print(json.dumps(r), flush=True)
+    return out
+
+
+def _utol(value) -> str:
+    return "none" if value is None or value == float("inf") else f"{value:g}"
+
+
+def _tolerance_markdown(rows: list[dict]) -> str:
+    lines = [
+        "| case | rtol | utol | reached | steps | cut-backs | iterations (all attempts) | median it./step | wall s "
+        "| value at 60 / 180 / 300 kPa | change against rtol = 1e-6 | time ratio in its pair |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    ref = {}
+    for r in rows:
+        key = (r["h_mm"], r["case"])
+        if r["rtol"] == 1e-6 and r["utol"] in (None, float("inf")):
+            ref.setdefault(key, r)
+    for i, r in enumerate(rows):
+        base = ref.get((r["h_mm"], r["case"]))
+        vals = [r["value_at_kpa"].get(p) for p in ("60", "180", "300")]
+        refs = [base["value_at_kpa"].get(p) if base else None for p in ("60", "180", "300")]
+        change = " / ".join(
+            "" if v is None or v0 is None else f"{100 * (v - v0) / abs(v0):+.4f} %" for v, v0 in zip(vals, refs)
+        )
+        ratio = f"{r['wall_s'] / rows[i - 1]['wall_s']:.2f}" if r["tag"] == 1 else ""
+        values = " / ".join("stopped" if v is None else f"{v:.7g}" for v in vals)
+        lines.append(
+            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | {r['rtol']:g} | {_utol(r['utol'])} | "
+            f"{100 * r['load_factor']:.0f} % | {r['steps']} | {r['cutbacks']} | {r['iterations_accepted']} "
+            f"({r['iterations_all']}) | {r['median_iterations']:g} | {r['wall_s']:.1f} | {values} | "
+            f"{'' if r is base else change} | {ratio} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _band_markdown(rows: list[dict]) -> str:
@@ -243,8 +301,20 @@ def main(argv=None) -> int:
         action="store_true",
         help="3D rays at 1.4 and 2 mm on the 0.01 mm band and the 3D default, side by side",
     )
+    ap.add_argument(
+        "--compare-tolerance",
+        action="store_true",
+        help="3D rays at 1.4 and 2 mm: rtol 1e-6 beside the 3D default, then 1e-4 beside the paper's 0.03 / 0.03",
+    )
     args = ap.parse_args(argv)
     rows = []
+    if args.compare_tolerance:
+        off = float("inf")  # no increment test
+        pairs = (({"rtol": 1e-6, "utol": off}, {}), ({"rtol": 1e-4, "utol": off}, {"rtol": 0.03, "utol": 0.03}))
+        for h, case in ((1.4, "free"), (1.4, "blocked"), (2.0, "free"), (2.0, "blocked")):
+            for pair in pairs:
+                rows += run_pair(3, h, case, pair)
+        return _write("bench_newton_tolerance", {"targets": TARGETS, "rows": rows}, _tolerance_markdown(rows))
     if args.compare_band:
         for h, case in ((1.4, "free"), (1.4, "blocked"), (2.0, "free"), (2.0, "blocked")):
             rows += run_side_by_side(3, h, case, (0.01, None))  # None: the 3D default band
