@@ -54,7 +54,7 @@ DEFAULT_SOLVER = {
     # Newton correction |du| <= utol |u - u_step_start| (MSC Marc's residual-and-displacement test, which the paper
     # ran at 0.03 on both). None by dimension, measured on the unit's rays (docs/fea.md): in 2D rtol 1e-6 and no
     # increment test (there rtol 1e-4 stalls the free ray early); in 3D 1e-2 on both, which moves the values by
-    # under 0.03 % and takes a sixth to a half off a ray's Newton iterations
+    # under 0.03 % and takes a quarter to a half off a ray's Newton iterations
     "rtol": None,
     "atol": 1.0e-10,  # N
     "utol": None,
