@@ -85,6 +85,7 @@ def _case(
     )
     wall = time.perf_counter() - t0
     key = "bending_angle_deg" if case == "free" else "bending_moment_nm"
+    resolved = _solve.by_dimension({**fem.DEFAULT_SOLVER, **solver}, dim)  # the settings the ray ran with
     at = {round(300.0 * hh["lam"]): hh[key] for hh in res.history if any(abs(hh["lam"] - s) < 1e-9 for s in STOPS)}
     if res.status == 0:
         at[300] = getattr(res, key)
@@ -96,8 +97,8 @@ def _case(
             "h_mm": h,
             "case": case,
             "lagged_pressure": bool(_assembly.LAGGED_PRESSURE),
-            "rtol": _solve.tolerances({**fem.DEFAULT_SOLVER, **solver}, dim)[0],
-            "utol": _solve.tolerances({**fem.DEFAULT_SOLVER, **solver}, dim)[1],
+            "rtol": resolved["rtol"],
+            "utol": resolved["utol"],
             "band_mm": fem.contact_band({} if copts is None else copts, dim),
             "status": int(res.status),
             "load_factor": float(res.load_factor),
@@ -130,26 +131,16 @@ def run_case(
     return out
 
 
-def run_side_by_side(dim: int, h: float, case: str, bands: tuple) -> list[dict]:
-    """One ray per contact band, each in its own process, all at once (one core each): same machine load."""
+def run_pair(dim: int, h: float, case: str, solvers: tuple, bands: tuple | None = None) -> list[dict]:
+    """One ray per setting (a solver dict, and a contact band where ``bands`` gives one; None: the default), each in
+    its own process, all at once (one core each, the same machine load), returned in the order given."""
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
-    procs = [ctx.Process(target=_case, args=(dim, h, case, {}, None, q, None, b)) for b in bands]
-    for p in procs:
-        p.start()
-    out = sorted((q.get() for _ in procs), key=lambda r: r["band_mm"])
-    for p in procs:
-        p.join()
-    for r in out:
-        print(json.dumps(r), flush=True)
-    return out
-
-
-def run_pair(dim: int, h: float, case: str, solvers: tuple) -> list[dict]:
-    """One ray per solver setting, each in its own process, all at once (one core each), in the order given."""
-    ctx = mp.get_context("spawn")
-    q = ctx.Queue()
-    procs = [ctx.Process(target=_case, args=(dim, h, case, dict(s, tag=i), None, q)) for i, s in enumerate(solvers)]
+    bands = bands or (None,) * len(solvers)
+    procs = [
+        ctx.Process(target=_case, args=(dim, h, case, dict(s, tag=i), None, q, None, b))
+        for i, (s, b) in enumerate(zip(solvers, bands))
+    ]
     for p in procs:
         p.start()
     out = sorted((q.get() for _ in procs), key=lambda r: r["tag"])
@@ -164,56 +155,31 @@ def _utol(value) -> str:
     return "none" if value is None or value == float("inf") else f"{value:g}"
 
 
-def _tolerance_markdown(rows: list[dict]) -> str:
+def _pairs_markdown(rows: list[dict], setting: dict) -> str:
+    """The rays of side-by-side runs (``run_pair``): ``setting`` = {column header: the row's cell}; each value's
+    change against the first row of its case, each time against the first ray of its pair."""
     lines = [
-        "| case | rtol | utol | reached | steps | cut-backs | iterations (all attempts) | median it./step | wall s "
-        "| value at 60 / 180 / 300 kPa | change against rtol = 1e-6 | time ratio in its pair |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    ref = {}
-    for r in rows:
-        key = (r["h_mm"], r["case"])
-        if r["rtol"] == 1e-6 and r["utol"] in (None, float("inf")):
-            ref.setdefault(key, r)
-    for i, r in enumerate(rows):
-        base = ref.get((r["h_mm"], r["case"]))
-        vals = [r["value_at_kpa"].get(p) for p in ("60", "180", "300")]
-        refs = [base["value_at_kpa"].get(p) if base else None for p in ("60", "180", "300")]
-        change = " / ".join(
-            "" if v is None or v0 is None else f"{100 * (v - v0) / abs(v0):+.4f} %" for v, v0 in zip(vals, refs)
-        )
-        ratio = f"{r['wall_s'] / rows[i - 1]['wall_s']:.2f}" if r["tag"] == 1 else ""
-        values = " / ".join("stopped" if v is None else f"{v:.7g}" for v in vals)
-        lines.append(
-            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | {r['rtol']:g} | {_utol(r['utol'])} | "
-            f"{100 * r['load_factor']:.0f} % | {r['steps']} | {r['cutbacks']} | {r['iterations_accepted']} "
-            f"({r['iterations_all']}) | {r['median_iterations']:g} | {r['wall_s']:.1f} | {values} | "
-            f"{'' if r is base else change} | {ratio} |"
-        )
-    return "\n".join(lines) + "\n"
-
-
-def _band_markdown(rows: list[dict]) -> str:
-    lines = [
-        "| case | band (mm) | reached | steps | cut-backs | iterations (all attempts) | median it./step | wall s "
-        "| value at 60 / 180 / 300 kPa | change against the narrowest band | time ratio against it |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| case | "
+        + " | ".join(setting)
+        + " | reached | steps | cut-backs | iterations (all attempts) | median it./step "
+        "| wall s | value at 60 / 180 / 300 kPa | change against the case's first row | time ratio in its pair |",
+        "|---|" + "---|" * len(setting) + "---|---|---|---|---|---|---|---|---|",
     ]
     first = {}
-    for r in rows:
-        key = (r["dim"], r["h_mm"], r["case"])
-        ref = first.setdefault(key, r)
+    for i, r in enumerate(rows):
+        ref = first.setdefault((r["dim"], r["h_mm"], r["case"]), r)
         vals = [r["value_at_kpa"].get(p) for p in ("60", "180", "300")]
         refs = [ref["value_at_kpa"].get(p) for p in ("60", "180", "300")]
         change = " / ".join(
-            "" if v is None or v0 is None else f"{100 * (v - v0) / abs(v0):+.2f} %" for v, v0 in zip(vals, refs)
+            "" if v is None or v0 is None else f"{100 * (v - v0) / abs(v0):+.4f} %" for v, v0 in zip(vals, refs)
         )
-        ratio = "" if r is ref else f"{r['wall_s'] / ref['wall_s']:.2f}"
-        values = " / ".join("stopped" if v is None else f"{v:.6g}" for v in vals)
+        ratio = f"{r['wall_s'] / rows[i - r['tag']]['wall_s']:.2f}" if r["tag"] else ""
+        values = " / ".join("stopped" if v is None else f"{v:.7g}" for v in vals)
         lines.append(
-            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | {r['band_mm']:g} | {100 * r['load_factor']:.0f} % | "
-            f"{r['steps']} | {r['cutbacks']} | {r['iterations_accepted']} ({r['iterations_all']}) | "
-            f"{r['median_iterations']:g} | {r['wall_s']:.1f} | {values} | {'' if r is ref else change} | {ratio} |"
+            f"| {r['dim']}D h = {r['h_mm']} {r['case']} | " + " | ".join(cell(r) for cell in setting.values()) + " | "
+            f"{100 * r['load_factor']:.0f} % | {r['steps']} | {r['cutbacks']} | {r['iterations_accepted']} "
+            f"({r['iterations_all']}) | {r['median_iterations']:g} | {r['wall_s']:.1f} | {values} | "
+            f"{'' if r is ref else change} | {ratio} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -314,11 +280,13 @@ def main(argv=None) -> int:
         for h, case in ((1.4, "free"), (1.4, "blocked"), (2.0, "free"), (2.0, "blocked")):
             for pair in pairs:
                 rows += run_pair(3, h, case, pair)
-        return _write("bench_newton_tolerance", {"targets": TARGETS, "rows": rows}, _tolerance_markdown(rows))
+        table = _pairs_markdown(rows, {"rtol": lambda r: f"{r['rtol']:g}", "utol": lambda r: _utol(r["utol"])})
+        return _write("bench_newton_tolerance", {"targets": TARGETS, "rows": rows}, table)
     if args.compare_band:
         for h, case in ((1.4, "free"), (1.4, "blocked"), (2.0, "free"), (2.0, "blocked")):
-            rows += run_side_by_side(3, h, case, (0.01, None))  # None: the 3D default band
-        return _write("bench_newton_band", {"targets": TARGETS, "rows": rows}, _band_markdown(rows))
+            rows += run_pair(3, h, case, ({}, {}), bands=(0.01, None))  # None: the 3D default band
+        table = _pairs_markdown(rows, {"band (mm)": lambda r: f"{r['band_mm']:g}"})
+        return _write("bench_newton_band", {"targets": TARGETS, "rows": rows}, table)
     if args.compare_search:
         for dim, h, case in ((3, 2.0, "blocked"), (3, 2.0, "free"), (3, 1.4, "blocked")):
             for search in (False, True):

@@ -5,6 +5,7 @@ from types import SimpleNamespace
 import pytest
 
 from workflow import fem
+from workflow.fem._solve import by_dimension
 from workflow.fem._unit import self_contact_pairs
 
 RESTARTS = [{"contact": {"smoothing_mm": 0.05}}, {"solver": {"predictor": False, "max_step": 0.02}}]
@@ -143,20 +144,12 @@ def test_the_contact_band_is_one_per_model_and_a_restart_band_widens_both():
         assert {p.smoothing for p in self_contact_pairs(um, per_model)} == {band}
 
 
-def test_a_step_grows_after_fewer_newton_iterations_in_3d_than_in_2d_unless_configured():
-    from workflow.fem._solve import grow_below_iter
-
-    assert grow_below_iter(fem.DEFAULT_SOLVER, 2) == 6
-    assert grow_below_iter(fem.DEFAULT_SOLVER, 3) == 8
-    assert grow_below_iter({"grow_below_iter": 10}, 2) == grow_below_iter({"grow_below_iter": 10}, 3) == 10
-
-
-def test_tolerances_by_dimension_unless_configured():
-    from workflow.fem._solve import tolerances
-
-    assert tolerances(fem.DEFAULT_SOLVER, 2) == (1e-6, None)
-    assert tolerances(fem.DEFAULT_SOLVER, 3) == (1e-2, 1e-2)
-    assert tolerances({"rtol": 0.03, "utol": 0.03}, 2) == tolerances({"rtol": 0.03, "utol": 0.03}, 3) == (0.03, 0.03)
+def test_a_none_in_the_solver_options_takes_the_default_of_the_model_dimension():
+    for dim, grow, rtol, utol, predictor in ((2, 6, 1e-6, None, True), (3, 8, 1e-2, 1e-2, False)):
+        opts = by_dimension(fem.DEFAULT_SOLVER, dim)
+        assert (opts["grow_below_iter"], opts["rtol"], opts["utol"], opts["predictor"]) == (grow, rtol, utol, predictor)
+        given = {"grow_below_iter": 10, "rtol": 0.03, "utol": 0.03, "predictor": False}
+        assert {k: by_dimension(given, dim)[k] for k in given} == given
 
 
 def test_the_increment_test_holds_newton_where_the_residual_test_lets_go():

@@ -27,9 +27,9 @@ def test_fem_case_names_round_trip_and_cases_are_listed_once():
 
 
 def test_fem_case_queue_priority_starts_the_longest_cases_first_and_before_every_other_job():
-    # the default study's cases in the order their measured times put them (a cold run of this version: 3D 1 mm
-    # 411 s, 1.4 mm 187 s, 2D 0.25 mm 149 s, 3D 2 mm 67 s, 2D 0.5 mm 40 s, ...); every case above 10, which puts the
-    # study before every other rule (0)
+    # the default study's cases in the order their times put them in the cold run the estimate was fitted to (3D 1 mm
+    # 411 s, 1.4 mm 187 s, 2D 0.25 mm 149 s, 3D 2 mm 67 s, 2D 0.5 mm 40 s, ...; the latest: 296 / 143 / 156 / 43 /
+    # 42 s, two neighbours swapped); every case above 10, which puts the study before every other rule (0)
     names = [
         "fem_3d_h1_contact",
         "fem_3d_h1.4_contact",

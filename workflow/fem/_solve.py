@@ -45,16 +45,12 @@ DEFAULT_SOLVER = {
     "max_iterations": None,  # Newton iterations of the whole path (None: no limit); a budget, not a wall time,
     # so that where a solve stops does not depend on the machine
     "max_iter": 15,  # Newton iterations per step
-    # grow the step when a step took fewer iterations; None by dimension: 6 in 2D, 8 in 3D (measured on the unit's
-    # rays: in 3D 8 takes a third off a free ray's iterations, same values to 7 digits; docs/fea.md)
-    "grow_below_iter": None,
+    "grow_below_iter": None,  # grow the step when a step took fewer iterations; None by dimension (BY_DIMENSION)
     "grow": 1.5,
     "cut": 0.5,
-    # a step has converged when |r| <= max(rtol (|f_ext| + |reactions|), atol) and, where utol is set, the last
-    # Newton correction |du| <= utol |u - u_step_start| (MSC Marc's residual-and-displacement test, which the paper
-    # ran at 0.03 on both). None by dimension, measured on the unit's rays (docs/fea.md): in 2D rtol 1e-6 and no
-    # increment test (there rtol 1e-4 stalls the free ray early); in 3D 1e-2 on both, which moves the values by
-    # under 0.03 % and takes a quarter to a half off a ray's Newton iterations
+    # a step has converged when |r| <= max(rtol (|f_ext| + |reactions|), atol) and, where utol is set (not None or
+    # inf), the last Newton correction |du| <= utol |u - u_step_start| (MSC Marc's residual-and-displacement test, which
+    # the paper ran at 0.03 on both); None by dimension (BY_DIMENSION)
     "rtol": None,
     "atol": 1.0e-10,  # N
     "utol": None,
@@ -69,18 +65,24 @@ DEFAULT_SOLVER = {
 }
 
 
-def tolerances(opts: Mapping, dim: int) -> tuple[float, float | None]:
-    """The residual and increment tolerances ``(rtol, utol)``: ``opts``' values, or by dimension where None."""
-    rtol, utol = opts.get("rtol"), opts.get("utol")
-    if dim == 2:
-        return (1.0e-6 if rtol is None else float(rtol)), (None if utol is None else float(utol))
-    return (1.0e-2 if rtol is None else float(rtol)), (1.0e-2 if utol is None else float(utol))
+#: What a None in ``DEFAULT_SOLVER`` (or the config) stands for, per model dimension, all measured on the unit's
+#: rays (docs/fea.md): in 3D a step grows after fewer than 8 iterations (a third fewer iterations per ray), converges
+#: at 1e-2 on the residual and on the increment (a quarter to a half fewer, values within 0.03 %) and takes no
+#: predictor (its contact steps cut back more with one); in 2D rtol = 1e-4 already stalls the free ray, and the
+#: predictor saves 30 % of its iterations.  A None that stays None (utol in 2D) switches the test off.
+BY_DIMENSION = {
+    2: {"grow_below_iter": 6, "rtol": 1.0e-6, "utol": None, "predictor": True},
+    3: {"grow_below_iter": 8, "rtol": 1.0e-2, "utol": 1.0e-2, "predictor": False},
+}
 
 
-def grow_below_iter(opts: Mapping, dim: int) -> int:
-    """Newton iterations below which an accepted step grows the next: ``opts["grow_below_iter"]``, or by dimension."""
-    value = opts.get("grow_below_iter")
-    return (6 if dim == 2 else 8) if value is None else int(value)
+def by_dimension(opts: Mapping, dim: int) -> dict:
+    """``opts`` with each None that :data:`BY_DIMENSION` has a value for replaced by the ``dim``-D one."""
+    out = dict(opts)
+    for key, value in BY_DIMENSION[dim].items():
+        if out.get(key) is None:
+            out[key] = value
+    return out
 
 
 def linear_solve(A: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
@@ -398,6 +400,7 @@ def _newton(model: Model, u0: np.ndarray, lam: float, p_ref: np.ndarray, opts: d
         """The increment test (``utol``; None or inf: none): the last correction against the step's displacement."""
         if opts["utol"] is None or np.isinf(opts["utol"]):
             return True
+        # + 1e-14 mm: a step whose state does not move (no load change) passes once its corrections vanish
         return last_du <= opts["utol"] * float(np.linalg.norm(u[:n] - u_begin)) + 1e-14
 
     for it in range(1, opts["max_iter"] + 1):
@@ -456,11 +459,8 @@ def solve_path(
     load factor in ``stops`` (0 < stop <= 1).  ``u0``: nodal displacements or
     a full state (``PathResult.state``) to start from.
     """
-    opts = dict(DEFAULT_SOLVER)
-    opts.update(options or {})
-    predict = model.solid.dim == 2 if opts["predictor"] is None else bool(opts["predictor"])
-    grow_below = grow_below_iter(opts, model.solid.dim)
-    opts["rtol"], opts["utol"] = tolerances(opts, model.solid.dim)
+    opts = by_dimension({**DEFAULT_SOLVER, **dict(options or {})}, model.solid.dim)
+    predict = bool(opts["predictor"])
     # each path starts from its own analysis: PARDISO's ordering follows the analysed pattern, so a pattern carried
     # over from an earlier model of the same size would make this path's round-off depend on what ran before
     _linsolve.default_solver.reset()
@@ -524,7 +524,7 @@ def solve_path(
             if measure is not None:
                 rec.update(measure(u, lam, info))
             history.append(rec)
-            if its < grow_below:
+            if its < opts["grow_below_iter"]:
                 dlam = min(dlam * opts["grow"], opts["max_step"])
             if time.perf_counter() - t_said >= PROGRESS_EVERY_S:
                 t_said = time.perf_counter()
