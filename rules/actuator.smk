@@ -72,6 +72,13 @@ rule unit_stiffness:
         "../workflow/scripts/unit_stiffness.py"
 
 
+# The stiffness study alone (outside the default target unless fea_check.unit_stiffness makes the check read it).
+rule stiffness_study:
+    input:
+        "results/actuator/unit_stiffness.nc",
+    localrule: True
+
+
 rule sweep_shard:
     input:
         unpack(get_fem_choice),

@@ -27,7 +27,7 @@ def smoke(tmp_path_factory):
     _copy_workflow(workdir)
     local = _local_overrides(workdir)
     cfgs = ["--configfile", "config/smoke.yaml", str(local)]
-    _run(workdir, "-c2", *cfgs)
+    _run(workdir, "all", "stiffness_study", "-c2", *cfgs)  # targets first: --configfile takes the rest
     return workdir, cfgs
 
 
