@@ -362,6 +362,29 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
     assert res.unit_bends_deg.sum() == pytest.approx(turn, abs=1e-9)
 
 
+def test_the_unloaded_actuator_rests_on_the_finger_without_a_contact_force():
+    """Laid on the skin (gap 0), the penalty law's band pushed actuator and finger apart at rest with eps d / 2 per
+    area (43 kPa with the restarts' 0.1 mm band, a residual 760x the weight's on the check's mesh) and tensed the
+    straps; the actuator now rests the widest band of every attempt above the skin, so no attempt starts loaded."""
+    from dataclasses import replace
+
+    from workflow.fem import contact_band, cumulative_attempts
+    from workflow.fem.coupled import coupled_model
+
+    fea = _coarse_patient_fea([F.JointSpring.linear(1e-3)] * 3)
+    attempts = cumulative_attempts(fea.setup.contact, {}, fea.restarts)
+    bands = [contact_band(c, 2) for c, _ in attempts]
+    assert max(bands) == pytest.approx(0.1) and min(bands) < max(bands)  # config: 0.01 mm, the restart 0.1 mm
+    cm = fea.setup.cm
+    gaps = []
+    for c, _ in attempts:
+        model, parts = coupled_model(replace(fea.setup, contact=c, gravity=None), {}, gravity_ramp=True)
+        r, _, _ = model.evaluate(np.zeros(model.nstate), 0.0, cm.mesh.p, tangent=False)
+        assert np.abs(model.T.T @ r).max() < 1e-12
+        gaps += [pair._project(cm.mesh.p)[3].min() for pair in parts["finger_pairs"]]
+    assert min(gaps) == pytest.approx(max(bands), abs=1e-9)  # touching: the skin's highest node at the band's edge
+
+
 def test_the_layout_shift_moves_the_fe_actuator_as_the_chain_lays_it():
     """cascade.layout_shift_mm moves the FE actuator along the finger by the shift (mm, distal positive), as
     build_cascade moves the chain's units; the finger stays where it is."""

@@ -176,7 +176,16 @@ def build_patient_fea(
     lr = geom["depth"] + geom["gap"]
     base_x = actuator_start_mm(counts["CMC"], lr, cascade_cfg.get("layout_shift_mm", 0.0))
     yt = geom["paper_width"] / 2 + geom["bot_layer"] + geom["height"]
-    cm = couple_meshes(act, (base_x + geom["gap"] / 2, finger.dorsal_y_m * 1e3 + yt), fm)
+    contact = dict(fem.DEFAULT_CONTACT)
+    contact.update(dict(actuator_cfg.get("contact", {})))
+    contact.pop("enabled", None)
+    restarts = tuple(fc["restarts"])
+    # the actuator rests where the finger contact's force starts: the penalty law pushes from the far edge of its
+    # band, so an actuator laid on the skin would be pushed off it at rest by eps d / 2 (43 kPa over the whole
+    # face with the restarts' 0.1 mm band, 4.3 kPa with 0.01 mm), a preload that tensed the straps; lifted by the
+    # widest band of every attempt, no attempt starts with a contact force
+    rest_gap = max(fem.contact_band(c, 2) for c, _ in fem.cumulative_attempts(contact, {}, restarts))
+    cm = couple_meshes(act, (base_x + geom["gap"] / 2, finger.dorsal_y_m * 1e3 + yt + rest_gap), fm)
     # materials
     mat = fem.material_constants(actuator_cfg.get("material"))
     mu_f, la_f = lame(fc["flesh"]["e_mpa"], fc["flesh"]["nu"])
@@ -202,9 +211,6 @@ def build_patient_fea(
         sel = cm.body == body
         b[sel] = -rho[sel] * w / float(np.sum(rho[sel] * area[sel]))  # N/mm^3, downward
     gravity = nodal_body_force(cm.mesh, b)  # external nodal forces (N/mm)
-    contact = dict(fem.DEFAULT_CONTACT)
-    contact.update(dict(actuator_cfg.get("contact", {})))
-    contact.pop("enabled", None)
     # as the silicone's: eps = factor mu / (1 mm), the same on every finger mesh
     contact["finger_penalty"] = float(fc["finger_penalty_factor"]) * mu_f / 1.0
     setup = CoupledSetup(
@@ -222,9 +228,8 @@ def build_patient_fea(
     notes = (
         f"plane strain per mm of actuator width W = {W:g} mm; finger weights {np.round([target[k] * W for k in range(3)], 5)} N, "
         f"actuator {target[-1] * W:.4g} N; strap {setup.strap_k:g} N/mm per mm; flesh mu {mu_f:.4g} MPa; "
-        f"{cm.mesh.p.shape[1] * 2} dofs"
+        f"{cm.mesh.p.shape[1] * 2} dofs; actuator {rest_gap:g} mm above the skin (the contact band)"
     )
-    restarts = tuple(fc["restarts"])
     return PatientFEA(
         setup=setup,
         finger=finger,

@@ -1,7 +1,8 @@
 """Whole actuator strapped to the planar finger (paper Fig. 18-21), plane strain.
 
 One mesh holds both bodies: the actuator (``build_actuator_mesh``, shifted so
-that its bottom outer face lies on the finger's dorsal skin) and the finger
+that its bottom outer face lies on the finger's dorsal skin, in the check one
+contact band above it, where the penalty force starts) and the finger
 (``build_finger_mesh``).  Materials: silicone (0), paper (1), flesh (2) and
 bone (3), the last three compressible neo-Hooke (valid under large rotation).
 Couplings:
