@@ -472,15 +472,17 @@ def test_a_collapsed_master_facet_is_out_of_reach_not_a_nan():
     assert np.isfinite(force).all() and np.isfinite(K).all() and np.isfinite(gmin)
 
 
-def test_3d_search_skips_only_slaves_out_of_reach(monkeypatch):
-    """The 3D search projects only slaves within reach + search of some facet centroid of their pool; every slave
-    the full search finds within the search distance of a facet it projects into is found alike, and the rest
-    are out of reach (the unit's pocket and gap walls, moved by a smooth field and noise)."""
-    um = fem.build_unit_mesh(None, h=4.0, dim=3)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_search_skips_only_slaves_out_of_reach(monkeypatch, dim):
+    """The search projects only slaves within reach + search of some facet of their pool (3D: of its centroid; 2D:
+    of the facet with its extension past a free edge); every slave the full search finds within the search distance
+    of a facet it projects into is found alike, and the rest are out of reach (the unit's pocket and gap walls,
+    moved by a smooth field and noise)."""
+    um = fem.build_unit_mesh(None, h=4.0 if dim == 3 else 0.5, dim=dim)
     pairs = self_contact_pairs(um)
     rng = np.random.default_rng(1)
     p = um.mesh.p
-    x = p + 0.3 * np.sin(p[[1, 2, 0]] / 3.0) + 0.05 * rng.standard_normal(p.shape)
+    x = p + 0.3 * np.sin(p[np.roll(np.arange(dim), -1)] / 3.0) + 0.05 * rng.standard_normal(p.shape)
     skipped = 0
     for pair in pairs:
         m, N, n, g, inside = pair._project(x)

@@ -64,8 +64,8 @@ __all__ = ["ContactPair", "contact_pairs_from_mesh"]
 
 _XI = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
 FD_STEP = 1e-7  # finite-difference step of the contact tangent, relative to the largest coordinate (mm)
-#: 3D search: skip the projections of slaves out of reach of every facet of their pool (same result; benchmarks
-#: switch it off to measure what it saves)
+#: skip the projections of slaves out of reach of every facet of their pool (same result; benchmarks switch it off
+#: to measure what it saves)
 REACH_FILTER = True
 
 
@@ -666,16 +666,40 @@ class ContactPair:
         return idx, cand[idx, k[idx]], g[idx, k[idx]]
 
     def _candidates_2d(self, x: np.ndarray, xs: np.ndarray):
-        """The 3 nearest facets per slave by straight clipped distance: (facet, xi, n, g, within range, distance)."""
+        """The 3 nearest facets per slave by straight clipped distance: (facet, xi, n, g, within range, distance).
+
+        A slave whose distance to every facet of its pool exceeds the search radius plus that facet's extension past
+        a free edge cannot lie within ``search`` of a facet's (extended) range: it is out of reach (g = inf, not
+        within), its projections skipped (most slaves, most of the time).
+        """
         ns = xs.shape[0]
         xa0 = x[:, self.master[self._pool, 0]].transpose(1, 2, 0)  # (ns, width, 2)
         xb0 = x[:, self.master[self._pool, 1]].transpose(1, 2, 0)
         t0 = xb0 - xa0
         d = xs[:, None, :] - xa0
-        c = np.clip(np.einsum("smi,smi->sm", d, t0) / np.einsum("smi,smi->sm", t0, t0), 0.0, 1.0)
+        tt = np.einsum("smi,smi->sm", t0, t0)
+        c = np.clip(np.einsum("smi,smi->sm", d, t0) / tt, 0.0, 1.0)
         near = np.linalg.norm(d - c[..., None] * t0, axis=2) + self._pad
         k = min(3, near.shape[1])
-        cand = np.take_along_axis(self._pool, np.argpartition(near, k - 1, axis=1)[:, :k], axis=1)  # (ns, k)
+        if REACH_FILTER:
+            ext = np.maximum(np.maximum(-self.lo, self.hi - 1.0), 0.0)[self._pool] * np.sqrt(tt)
+            live = (near - ext <= self.search + 1e-9).any(axis=1)
+            if not live.all():
+                cand = self._pool[:, :k].copy()
+                xi, g = np.full((ns, k), 0.5), np.full((ns, k), np.inf)
+                n, within, dist = np.zeros((ns, k, 2)), np.zeros((ns, k), bool), np.full((ns, k), np.inf)
+                idx = np.flatnonzero(live)
+                if idx.size:
+                    sub = self._near_candidates_2d(x, xs[idx], self._pool[idx], near[idx], k)
+                    for full, part in zip((cand, xi, n, g, within, dist), sub):
+                        full[idx] = part
+                return cand, xi, n, g, within, dist
+        return self._near_candidates_2d(x, xs, self._pool, near, k)
+
+    def _near_candidates_2d(self, x: np.ndarray, xs: np.ndarray, pool: np.ndarray, near: np.ndarray, k: int):
+        """``_candidates_2d`` for slaves xs (ns, 2) with their ``pool`` and straight clipped distances ``near``."""
+        ns = xs.shape[0]
+        cand = np.take_along_axis(pool, np.argpartition(near, k - 1, axis=1)[:, :k], axis=1)  # (ns, k)
         mn = self._nodes_2d(cand.ravel())
         X = np.concatenate([np.repeat(xs, k, axis=0)[:, None, :], x[:, mn].transpose(1, 2, 0)], axis=1)
         xi, n, g = _segment_2d(X, self.prev[cand.ravel()] >= 0, self.next[cand.ravel()] >= 0)
