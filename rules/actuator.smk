@@ -92,6 +92,7 @@ rule sweep_shard:
     wildcard_constraints:
         fea="2d|3d",
         shard=r"\d+",
+    priority: sweep_shard_priority  # the plans wait for the sweeps (workflow/common/scheduling.py)
     conda:
         "../envs/project.yaml"
     params:

@@ -349,6 +349,13 @@ def fem_case_priority(wildcards):
     return scheduling.fem_case_priority(fidelity_choice.FemCase.parse(wildcards.case))
 
 
+def sweep_shard_priority(wildcards):
+    """Queue priority of a sweep shard: ahead of the studies nothing waits for, the longest 3D rays first."""
+    return scheduling.sweep_shard_priority(
+        wildcards.fea, int(wildcards.shard), int(config["sweep"][wildcards.fea]["n_shards"])
+    )
+
+
 def fidelity_auto():
     return bool(config["fidelity"]["auto"])
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from workflow.common.fidelity_choice import FemCase
 
-__all__ = ["CHECK_PRIORITY", "fem_case_priority", "fem_case_seconds"]
+__all__ = ["CHECK_PRIORITY", "fem_case_priority", "fem_case_seconds", "sweep_shard_priority"]
 
 #: The FEA check's mesh study and the FEA checks, the run's last jobs: ahead of the studies that become ready with
 #: them and that nothing waits for (the unit stiffness study, the stand-alone exercises); below the FE study's cases.
@@ -31,3 +31,18 @@ def fem_case_priority(case: FemCase) -> int:
     """Snakemake priority of an FE study case's job: the longer it runs (:func:`fem_case_seconds`), the earlier it
     starts, all above 10 so that the study, which every sweep waits for, runs before any other rule (priority 0)."""
     return 11 + int(round(fem_case_seconds(case) / 5.0))
+
+
+def sweep_shard_priority(fea: str, shard: int, n_shards: int) -> int:
+    """Snakemake priority of a sweep shard's job: every plan waits for the sweeps, so they go ahead of the studies that
+    nothing waits for (the end-moment check, the stability rays: priority 0), which then fill the cores while the
+    check's mesh study runs alone; below the checks (:data:`CHECK_PRIORITY`), which become ready only after them.
+
+    3D shards first, in the order of their rays' cost: ray k of the ratios P_B / P_T = 0 .. 1 is dealt to shard
+    k mod ``n_shards``, and the more one-sided the pressure, the further the unit bends and the longer its ray runs
+    (145 s at P_B = 0 down to 79 s at P_B = P_T in the last cold run), so shard 0 starts first (4 .. 2); the 2D
+    shards (5-11 s each) at 1.
+    """
+    if fea == "3d":
+        return 2 + (2 * (n_shards - 1 - shard)) // max(n_shards - 1, 1)
+    return 1
