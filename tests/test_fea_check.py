@@ -364,7 +364,7 @@ def test_straps_hold_the_finger_on_the_actuator_under_gravity():
 
 def test_the_unloaded_actuator_rests_on_the_finger_without_a_contact_force():
     """Laid on the skin (gap 0), the penalty law's band pushed actuator and finger apart at rest with eps d / 2 per
-    area (43 kPa with the restarts' 0.1 mm band, a residual 760x the weight's on the check's mesh) and tensed the
+    area and contact pass (43 kPa with the restarts' 0.1 mm band, a residual 760x the weight's on the check's mesh) and tensed the
     straps; the actuator now rests the widest band of every attempt above the skin, so no attempt starts loaded."""
     from dataclasses import replace
 

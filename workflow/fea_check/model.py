@@ -181,8 +181,8 @@ def build_patient_fea(
     contact.pop("enabled", None)
     restarts = tuple(fc["restarts"])
     # the actuator rests where the finger contact's force starts: the penalty law pushes from the far edge of its
-    # band, so an actuator laid on the skin would be pushed off it at rest by eps d / 2 (43 kPa over the whole
-    # face with the restarts' 0.1 mm band, 4.3 kPa with 0.01 mm), a preload that tensed the straps; lifted by the
+    # band, so an actuator laid on the skin would be pushed off it at rest by eps d / 2 per contact pass (43 kPa
+    # with the restarts' 0.1 mm band, 4.3 kPa with 0.01 mm), a preload that tensed the straps; lifted by the
     # widest band of every attempt, no attempt starts with a contact force
     rest_gap = max(fem.contact_band(c, 2) for c, _ in fem.cumulative_attempts(contact, {}, restarts))
     cm = couple_meshes(act, (base_x + geom["gap"] / 2, finger.dorsal_y_m * 1e3 + yt + rest_gap), fm)
