@@ -63,10 +63,9 @@ def get_final_output():
     out += ["results/actuator/surrogate_cv.nc", "results/actuator/mapping_2d3d.nc"]
     # The unit under an external end moment: FEA at prescribed end rotations vs the unit model.
     out += ["results/actuator/unit_moment_check.nc"]
-    # The unit's bending stiffness on and off the diagonal P_T = P_B (FEA of a chain) vs the unit model's: a study of
-    # its own (snakemake -c2 stiffness_study, 4.7 min of one core), in the default run only when the check reads it.
-    if config["fea_check"].get("unit_stiffness"):
-        out += ["results/actuator/unit_stiffness.nc"]
+    # The unit's bending stiffness on and off the diagonal P_T = P_B (FEA of a chain) vs the unit model's is a study of
+    # its own (snakemake -c2 stiffness_study, 4.7 min of one core): the FEA check pulls it in when it reads it
+    # (fea_check.unit_stiffness, get_check_stiffness).
     # Cascade plans per patient and their validation against Tables 8 and 10.
     out += expand("results/patients/{patient}/cascade_plan.nc", patient=PATIENTS)
     out += ["results/validation/cascade.nc"]

@@ -380,7 +380,7 @@ def test_the_unloaded_actuator_rests_on_the_finger_without_a_contact_force():
     for c, _ in attempts:
         model, parts = coupled_model(replace(fea.setup, contact=c, gravity=None), {}, gravity_ramp=True)
         r, _, _ = model.evaluate(np.zeros(model.nstate), 0.0, cm.mesh.p, tangent=False)
-        assert np.abs(model.T.T @ r).max() < 1e-12
+        assert np.abs(model.T.T @ r).max() < 1e-9  # round-off (4e-13 measured); 0.025 N/mm laid on the skin
         gaps += [pair._project(cm.mesh.p)[3].min() for pair in parts["finger_pairs"]]
     assert min(gaps) == pytest.approx(max(bands), abs=1e-9)  # touching: the skin's highest node at the band's edge
 
