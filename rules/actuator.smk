@@ -82,6 +82,7 @@ rule stiffness_study:
 rule sweep_shard:
     input:
         unpack(get_fem_choice),
+        unpack(get_fem_cases),
         code=code_files("scripts.sweep_shard"),
     output:
         "results/actuator/sweep/{fea}/shard{shard}.nc",

@@ -320,13 +320,26 @@ def get_check_study_slice(wildcards):
 
 
 def get_fem_case_slice(wildcards):
-    """Param function: one FE case of the fidelity study depends on the unit config and the study points."""
+    """Param function: one FE case of the fidelity study depends on the unit config and the study points (and, where
+    it shares the sweep's P_B = 0 ray, on that ray's samples)."""
     return {
         "case": wildcards.case,
         "actuator": config["actuator"],
         "p_top_kpa": config["fidelity"]["p_top_kpa"],
         "iteration_budget": config["fidelity"]["fem_iteration_budget"],
+        "sweep": get_fem_case_sweep(wildcards),
     }
+
+
+def get_fem_case_sweep(wildcards):
+    """Param function: the sweep config of the case's model ({} where the case does not share the sweep's P_B = 0 ray,
+    workflow.common.fidelity_choice.shares_sweep_ray)."""
+    case = fidelity_choice.FemCase.parse(wildcards.case)
+    cases = fidelity_choice.fem_cases(config["fidelity"]["fem_cases"])
+    if not fidelity_choice.shares_sweep_ray(case, cases):
+        return {}
+    sweep = config["sweep"][case.model]
+    return {"p_max_kpa": sweep["p_max_kpa"], "n_pressures": sweep["n_pressures"]}
 
 
 def get_fem_tolerances():
@@ -366,7 +379,8 @@ def get_fem_choice(wildcards):
 
 def get_fem_cases(wildcards):
     """Input function: the FE study's cases, when fidelity.auto picks the mesh: the unit check reads the chosen
-    case's rays instead of solving them again (the study ran them on the same mesh and config)."""
+    case's rays and the sweep its P_B = 0 ray instead of solving them again (the study ran them on the same mesh and
+    config)."""
     return {"cases": expand("results/fidelity/fem/{case}.nc", case=FEM_CASES)} if fidelity_auto() else {}
 
 

@@ -32,6 +32,7 @@ rule fidelity_fem:
         actuator=config["actuator"],
         p_top_kpa=config["fidelity"]["p_top_kpa"],
         iteration_budget=config["fidelity"]["fem_iteration_budget"],
+        sweep=get_fem_case_sweep,
         config_slice=get_fem_case_slice,
     script:
         "../workflow/scripts/fidelity_fem.py"

@@ -101,3 +101,79 @@ def test_a_studied_case_that_failed_or_differs_is_solved_again(studied_case):
     n = unit_mesh_from_config(act3, 3).mesh.p.size
     known = entry_fem.studied_unit_check(as3d.assign(displacement_mm=("dof", np.zeros(n))), act3, "3d", [10.0, 30.0])
     assert known is not None and known[1][1].size == n
+
+
+SWEEP = {"p_max_kpa": 30.0, "n_ratios": 2, "n_pressures": 3, "n_shards": 2}
+
+
+def test_the_sweep_reads_its_first_ray_from_a_study_case_that_landed_on_its_samples(tmp_path, monkeypatch):
+    """A study case that shares the sweep's P_B = 0 ray lands its steps on the sweep's samples too and keeps both
+    paths: the shard built from them equals the shard solved here to the last digit, and the study's own points
+    keep their values; a case on another config, or one whose ray stopped, is solved again."""
+    from workflow.actuator import fe_solver
+
+    path = tmp_path / "fem_2d_h2_contact.nc"
+    write_fem_case(
+        "fem_2d_h2_contact",
+        path,
+        actuator=ACT,
+        config_slice={},
+        p_top_kpa=[10.0, 30.0],
+        iteration_budget=1200,
+        sweep=SWEEP,
+    )
+    case = open_result(path)
+    assert case["path_lam"].dims == ("case", "step")
+    np.testing.assert_allclose(case.attrs["path_stops"], [1 / 3, 2 / 3, 1.0], rtol=0, atol=0)
+    act = case_actuator(ACT, FemCase("2d", 2.0, True))
+    solved, _ = unit_check(act, ("2d",), [10.0, 30.0])  # the study's points on their own path: the same values
+    np.testing.assert_allclose(case["bending_angle_deg"], solved["bending_angle_deg"].sel(model="2d"), rtol=1e-6)
+
+    fresh = entry_fem.write_shard(
+        tmp_path / "solved.nc", fea="2d", shard=0, sweep_cfg=SWEEP, actuator_cfg=act, config_slice={}
+    )
+    real = fe_solver.make_solver
+
+    def no_first_ray(fea, actuator):
+        solve = real(fea, actuator)
+
+        def guarded(direction, scales):
+            assert float(direction[1]) > 0.0, "the P_B = 0 ray was solved again"
+            return solve(direction, scales)
+
+        return guarded
+
+    monkeypatch.setattr(entry_fem, "make_solver", no_first_ray)
+    read = entry_fem.write_shard(
+        tmp_path / "read.nc", fea="2d", shard=0, sweep_cfg=SWEEP, actuator_cfg=act, config_slice={}, studied=case
+    )
+    for name in ("bending_angle_deg", "bending_moment_nm", "status", "newton_iterations", "overlap_depth_mm"):
+        np.testing.assert_array_equal(read[name].values, fresh[name].values)
+    np.testing.assert_allclose(read["wall_time_s"].sum(), float(case["path_wall_time_s"].sum()), rtol=1e-12)
+
+    scales = np.array([1 / 3, 2 / 3, 1.0])
+    assert fe_solver.studied_ray(case, act, "2d", (30.0, 0.0), scales) is not None
+    stiffer = dict(act, contact=dict(act["contact"], penalty_factor=300.0))
+    assert fe_solver.studied_ray(case, stiffer, "2d", (30.0, 0.0), scales) is None  # another config
+    assert fe_solver.studied_ray(case, act, "2d", (30.0, 10.0), scales) is None  # another ray
+    assert fe_solver.studied_ray(case, act, "2d", (30.0, 0.0), scales[1:]) is None  # other samples
+    stopped = case.copy()
+    stopped["path_status"] = stopped["path_status"].where(stopped["case"] == "free", 1)
+    assert fe_solver.studied_ray(stopped, act, "2d", (30.0, 0.0), scales) is None
+    # the unit check reading this case keeps the check's variables only
+    known = entry_fem.studied_unit_check(case, act, "2d", [10.0, 30.0])
+    assert known is not None and not any(str(k).startswith("path_") for k in known[0].data_vars)
+
+
+def test_only_the_coarser_contact_cases_share_the_sweep_ray():
+    from workflow.common.fidelity_choice import fem_cases, shares_sweep_ray
+
+    cases = fem_cases(
+        [
+            {"model": "2d", "h_mm": [1.0, 0.5, 0.25], "contact": True},
+            {"model": "2d", "h_mm": [1.0], "contact": False},
+            {"model": "3d", "h_mm": [2.0, 1.4, 1.0], "contact": True},
+        ]
+    )
+    share = {c.name for c in cases if shares_sweep_ray(c, cases)}
+    assert share == {"fem_2d_h1_contact", "fem_2d_h0.5_contact", "fem_3d_h2_contact", "fem_3d_h1.4_contact"}

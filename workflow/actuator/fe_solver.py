@@ -12,9 +12,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from workflow import fem
+from workflow.common.provenance import config_sha256
 from workflow.common.runlog import solved
 
-__all__ = ["samples_from_paths", "make_solver"]
+__all__ = ["samples_from_paths", "make_solver", "ray_config_sha256", "studied_ray"]
 
 log = logging.getLogger(__name__)
 
@@ -105,6 +106,54 @@ def samples_from_paths(
         "wall_time_s": wall * share,
         **checks,
     }
+
+
+def ray_config_sha256(actuator: Mapping[str, Any]) -> str:
+    """Hash of the actuator config a ray is solved with, its Newton budget left out (a budget only ends a ray
+    early: a ray that reached its load was not touched by it)."""
+    return config_sha256({k: v for k, v in dict(actuator).items() if k != "iteration_budget"})
+
+
+def studied_ray(
+    case: Any, actuator: Mapping[str, Any], fea: str, direction: Sequence[float], scales: np.ndarray
+) -> dict[str, np.ndarray] | None:
+    """The samples of the sweep ray ``direction`` at ``scales`` from the FE study's case ``case``, or None where
+    it must be solved.
+
+    A case that shares the sweep's P_B = 0 ray (``workflow.fidelity.entry_fem.write_fem_case`` with a sweep)
+    solved it on the same mesh and config with its load steps landing on the same load factors, and keeps both
+    paths (``path_*``): the solver's path depends on nothing else (each path starts from its own analysis), so
+    :func:`samples_from_paths` on them gives what solving the ray here gives.  Taken only when the model, the
+    element size, the contact switch, the config (:func:`ray_config_sha256`), the direction and the load factors
+    (to the bit) are the ray's and both paths reached their load.
+    """
+    if case is None or "path_status" not in case or "actuator_sha256" not in case.attrs:
+        return None
+    stops = np.atleast_1d(np.asarray(case.attrs.get("path_stops", []), float))
+    p_top = float(case.attrs.get("path_p_top_kpa", np.nan))
+    same = (
+        str(case.attrs.get("model")) == fea
+        and str(case.attrs["actuator_sha256"]) == ray_config_sha256(actuator)
+        and float(direction[1]) == 0.0
+        and float(direction[0]) == p_top
+        and np.array_equal(stops, np.asarray(scales, float))
+        and bool((case["path_status"] == 0).all())
+    )
+    if not same:
+        return None
+    paths = {}
+    for c in ("free", "blocked"):
+        lam = case["path_lam"].sel(case=c).values
+        keep = np.isfinite(lam)
+        steps = [str(k) for k in case.data_vars if str(k).startswith("path_") and "step" in case[k].dims]
+        cols = {k[len("path_") :]: case[k].sel(case=c).values[keep] for k in steps}
+        history = [{k: float(v[j]) for k, v in cols.items()} for j in range(int(keep.sum()))]
+        paths[c] = {
+            "status": int(case["path_status"].sel(case=c)),
+            "wall_time_s": float(case["path_wall_time_s"].sel(case=c)),
+            "history": history,
+        }
+    return samples_from_paths(direction, scales, paths["free"], paths["blocked"])
 
 
 def make_solver(fea: str, actuator_config: Mapping[str, Any]) -> Callable[[Sequence[float], np.ndarray], Any]:

@@ -24,6 +24,7 @@ __all__ = [
     "apply_fem_choice",
     "check_choice",
     "P_STUDY",
+    "shares_sweep_ray",
 ]
 
 
@@ -56,6 +57,21 @@ def fem_cases(spec: Sequence[Mapping]) -> list[FemCase]:
             if c not in out:
                 out.append(c)
     return out
+
+
+def shares_sweep_ray(case: FemCase, cases: Sequence[FemCase]) -> bool:
+    """Whether the case's rays also land on the sweep's P_B = 0 samples, so that a sweep on its mesh takes that
+    ray from the study instead of solving it again.
+
+    Every case with contact but the finest of its model (sweeps always run with contact).  The finest keeps the
+    study's own points: it is the study's reference, a fine ray's fate at a contact event hangs on where its steps
+    land (the 2D 0.25 mm free ray with the sweep's ten stops stops at 150 kPa instead of past 180 kPa, whose
+    Richardson point it carries), and it is chosen only when no coarser mesh is within the tolerance.
+    """
+    if not case.contact:
+        return False
+    finest = min(c.h_mm for c in cases if c.model == case.model and c.contact)
+    return case.h_mm > finest
 
 
 def case_actuator(actuator: Mapping, case: FemCase, iteration_budget: int | None = None) -> dict:

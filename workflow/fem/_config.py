@@ -105,15 +105,44 @@ def solve_unit_from_config(
     return res
 
 
-def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 300.0)):
+#: The load path of a ray kept per step by ``unit_check(..., keep_paths=True)`` (what a sweep's samples are made
+#: of), with units.
+PATH_KEYS = {
+    "lam": "1",
+    "iterations": "1",
+    "bending_angle_deg": "degree",
+    "bending_moment_nm": "N m",
+    "max_penetration_mm": "mm",
+    "overlap_depth_mm": "mm",
+    "min_pocket_area_mm2": "mm2",
+    "min_pocket_volume_mm3": "mm3",
+}
+
+
+def unit_check(
+    actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 300.0), extra_stops=(), keep_paths: bool = False
+):
     """Free angle and blocked moment of the unit at P_T = p_top_kpa, P_B = 0 (Fig. 12 points).
 
     One ray per (model, case) from 0 to max(p_top_kpa) whose load steps hit
-    every point exactly; ``wall_time_s`` is the time from zero load to the point.
+    every point exactly, and every load factor of ``extra_stops`` (fractions of
+    max(p_top_kpa) in (0, 1], e.g. the scales of a sweep's P_B = 0 ray, so that the
+    sweep can take that ray from here: a point within 1e-9 of one of them lands on
+    its value, so the steps are the sweep ray's to the last bit); ``wall_time_s``
+    is the time from zero load to the point.
+    ``keep_paths``: the dataset also holds each ray's accepted steps
+    (``path_*`` on a ``step`` dimension, NaN-padded; :data:`PATH_KEYS`), its
+    ``path_status`` and ``path_wall_time_s`` (restarts included).
     Returns ``(dataset, deformed 3D mesh and displacement at the largest
     pressure or None)``.
     """
     p_top_kpa = np.asarray(sorted(p_top_kpa), dtype=float)
+    pmax = float(p_top_kpa[-1])
+    extra = [float(v) for v in np.asarray(extra_stops, dtype=float).ravel()]
+    if any(not 0.0 < v <= 1.0 for v in extra):
+        raise ValueError(f"extra stops are load factors in (0, 1], got {extra}")
+    own = [float(v) for v in p_top_kpa / pmax if not any(abs(v - e) <= 1e-9 for e in extra)]
+    stops = tuple(sorted(set(extra + own)))
     cases = ("free", "blocked")
     shape = (len(models), len(p_top_kpa), len(cases))
     angle = np.full(shape, np.nan)
@@ -126,21 +155,15 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
     status = np.full(shape, 3, dtype=np.int32)
     iters = np.zeros(shape, dtype=np.int32)
     deformed = None
-    pmax = float(p_top_kpa[-1])
+    paths = {}  # (model index, case index) -> the path result
     for i, model in enumerate(models):
         dim = int(model[0])
         mesh = unit_mesh_from_config(actuator, dim)
         for k, case in enumerate(cases):
             res = solve_unit_from_config(
-                actuator,
-                dim,
-                pmax,
-                0.0,
-                case,
-                mesh=mesh,
-                stops=tuple(p_top_kpa / pmax),
-                keep_displacement=(dim == 3 and case == "free"),
+                actuator, dim, pmax, 0.0, case, mesh=mesh, stops=stops, keep_displacement=(dim == 3 and case == "free")
             )
+            paths[i, k] = res
             log.info(
                 "%s %s to P_T=%g kPa: status %d (%s), %d iterations, %.1f s",
                 model,
@@ -235,4 +258,33 @@ def unit_check(actuator: Mapping, models=("2d", "3d"), p_top_kpa=(60.0, 180.0, 3
             "p_bottom_kpa": ((), 0.0, {"units": "kPa", "long_name": "bottom chamber pressure"}),
         },
     )
+    if keep_paths:
+        ds = ds.assign(_path_variables(paths, len(models), len(cases)))
+        ds.attrs["path_stops"] = np.asarray(stops)  # load factors of the rays' end pressure
+        ds.attrs["path_p_top_kpa"] = pmax
     return ds, deformed
+
+
+def _path_variables(paths: Mapping, n_models: int, n_cases: int) -> dict:
+    """The rays' accepted steps as ``path_*`` variables on (model, case, step), NaN past a ray's last step."""
+    n_steps = max((len(r.history) for r in paths.values()), default=0)
+    dims = ("model", "case", "step")
+    out = {}
+    for key, units in PATH_KEYS.items():
+        if not any(key in h for r in paths.values() for h in r.history):
+            continue
+        arr = np.full((n_models, n_cases, n_steps), np.nan)
+        for (i, k), r in paths.items():
+            arr[i, k, : len(r.history)] = [h.get(key, np.nan) for h in r.history]
+        out[f"path_{key}"] = (dims, arr, {"units": units, "long_name": f"{key} at each accepted load step of the ray"})
+    out["path_status"] = (
+        ("model", "case"),
+        np.array([[paths[i, k].status for k in range(n_cases)] for i in range(n_models)], np.int32),
+        {"units": "1", "long_name": "solver status of the ray (0: reached its largest pressure)"},
+    )
+    out["path_wall_time_s"] = (
+        ("model", "case"),
+        np.array([[paths[i, k].wall_time_s for k in range(n_cases)] for i in range(n_models)]),
+        {"units": "s", "long_name": "wall time of the ray, restarts included"},
+    )
+    return out

@@ -16,6 +16,8 @@ import numpy as np
 import xarray as xr
 
 from workflow import fem
+from workflow.actuator.fe_solver import ray_config_sha256
+from workflow.actuator.sweep import ray_design
 from workflow.common.fidelity_choice import P_STUDY, FemCase, case_actuator
 from workflow.common.provenance import write_dataset
 from workflow.common.runlog import solved
@@ -33,6 +35,7 @@ def write_fem_case(
     config_slice: Any,
     p_top_kpa: Sequence[float] = P_STUDY,
     iteration_budget: int | None = None,
+    sweep: Mapping[str, Any] | None = None,
     rule: str = "fidelity_fem",
 ) -> xr.Dataset:
     """Rule ``fidelity_fem``: the unit check of one case -> ``results/fidelity/fem/{case}.nc``.
@@ -41,11 +44,20 @@ def write_fem_case(
     their wall times (:func:`workflow.fem.unit_check`, retries included).
     ``iteration_budget``: Newton iterations per ray, restarts included (None:
     the actuator's own); a ray that spends it is recorded as failed (status 2).
+    ``sweep``: the model's sweep config (``p_max_kpa``, ``n_pressures``) where
+    the case shares the sweep's P_B = 0 ray
+    (:func:`workflow.common.fidelity_choice.shares_sweep_ray`): the rays also
+    land on its samples and the file keeps their paths, from which a sweep on
+    this mesh takes that ray (:func:`workflow.actuator.fe_solver.studied_ray`).
     """
 
     case = FemCase.parse(case_name)
+    act = case_actuator(actuator, case, iteration_budget)
+    extra = ()
+    if sweep and np.isclose(float(sweep["p_max_kpa"]), max(p_top_kpa)):
+        extra = tuple(ray_design(float(sweep["p_max_kpa"]), 2, int(sweep["n_pressures"]))["scales"])
     t0 = time.perf_counter()
-    ds, deformed = fem.unit_check(case_actuator(actuator, case, iteration_budget), (case.model,), p_top_kpa)
+    ds, deformed = fem.unit_check(act, (case.model,), p_top_kpa, extra_stops=extra, keep_paths=bool(extra))
     wall = time.perf_counter() - t0
     ds = ds.squeeze("model", drop=True)
     ds["case_wall_time_s"] = (
@@ -61,6 +73,8 @@ def write_fem_case(
         )
     ds.attrs.update({"case": case.name, "model": case.model, "h_mm": case.h_mm, "contact": int(case.contact)})
     ds.attrs["iteration_budget"] = "none" if iteration_budget is None else int(iteration_budget)
+    if extra:  # what a sweep must match to take the P_B = 0 ray from here (the budget only ends a ray early)
+        ds.attrs["actuator_sha256"] = ray_config_sha256(act)
     log.info(
         "%s: free %s deg, blocked %s N m, status %s, %.1f s",
         case.name,

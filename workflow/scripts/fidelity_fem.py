@@ -10,5 +10,6 @@ write_fem_case(
     config_slice=p.config_slice,
     p_top_kpa=p.p_top_kpa,
     iteration_budget=p.iteration_budget,
+    sweep=p.sweep,
     rule=snakemake.rule,
 )  # noqa: F821
