@@ -143,16 +143,22 @@ def test_the_sweep_reads_its_first_ray_from_a_study_case_that_landed_on_its_samp
 
         return guarded
 
+    scales = np.array([1 / 3, 2 / 3, 1.0])
+    assert fe_solver.studied_ray(case, act, "2d", (30.0, 0.0), scales) is not None
     monkeypatch.setattr(entry_fem, "make_solver", no_first_ray)
     read = entry_fem.write_shard(
         tmp_path / "read.nc", fea="2d", shard=0, sweep_cfg=SWEEP, actuator_cfg=act, config_slice={}, studied=case
     )
-    for name in ("bending_angle_deg", "bending_moment_nm", "status", "newton_iterations", "overlap_depth_mm"):
+    assert "fem_2d_h2_contact" in read.attrs["rays_read_from_study"]
+    assert "rays_read_from_study" not in fresh.attrs
+    names = ("bending_angle_deg", "bending_moment_nm", "status", "newton_iterations")
+    for name in names + ("max_penetration_mm", "overlap_depth_mm", "min_pocket_area_mm2"):
         np.testing.assert_array_equal(read[name].values, fresh[name].values)
     np.testing.assert_allclose(read["wall_time_s"].sum(), float(case["path_wall_time_s"].sum()), rtol=1e-12)
 
-    scales = np.array([1 / 3, 2 / 3, 1.0])
-    assert fe_solver.studied_ray(case, act, "2d", (30.0, 0.0), scales) is not None
+    # a sweep with a Newton budget below the study's might have stopped where the study's ray went on
+    assert fe_solver.studied_ray(case, dict(act, iteration_budget=1200), "2d", (30.0, 0.0), scales) is not None
+    assert fe_solver.studied_ray(case, dict(act, iteration_budget=1199), "2d", (30.0, 0.0), scales) is None
     stiffer = dict(act, contact=dict(act["contact"], penalty_factor=300.0))
     assert fe_solver.studied_ray(case, stiffer, "2d", (30.0, 0.0), scales) is None  # another config
     assert fe_solver.studied_ray(case, act, "2d", (30.0, 10.0), scales) is None  # another ray
@@ -177,3 +183,12 @@ def test_only_the_coarser_contact_cases_share_the_sweep_ray():
     )
     share = {c.name for c in cases if shares_sweep_ray(c, cases)}
     assert share == {"fem_2d_h1_contact", "fem_2d_h0.5_contact", "fem_3d_h2_contact", "fem_3d_h1.4_contact"}
+
+
+def test_the_study_lands_on_the_sweep_samples_only_where_its_ray_can_be_the_sweeps():
+    from workflow.common.rays import shared_stops
+
+    assert shared_stops([60.0, 180.0, 300.0], {"p_max_kpa": 300.0, "n_pressures": 10}) == tuple(np.arange(1, 11) / 10)
+    assert shared_stops([60.0, 180.0, 300.0], {"p_max_kpa": 300.0, "n_pressures": 4}) == ()  # 60 kPa not a sample
+    assert shared_stops([60.0, 180.0, 300.0], {"p_max_kpa": 250.0, "n_pressures": 10}) == ()  # another end pressure
+    assert shared_stops([60.0, 180.0, 300.0], {}) == ()

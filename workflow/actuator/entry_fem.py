@@ -167,6 +167,9 @@ def write_shard(
     )
     ds.attrs["fea"] = fea
     ds.attrs["shard"] = int(shard)
+    read = getattr(solver, "read", [])
+    if read:  # its wall time and Newton iterations are the study case's
+        ds.attrs["rays_read_from_study"] = "; ".join(read)
     mesh = dict(actuator_cfg.get("mesh", {}))
     ds.attrs["h_mm"] = float(mesh.get(f"h_{fea}_mm", 1.0 if fea == "2d" else 2.0))
     ds.attrs["contact"] = int(bool(dict(actuator_cfg.get("contact", {})).get("enabled", True)))
@@ -184,12 +187,15 @@ def _reading_studied_ray(solve_ray: Callable, case: xr.Dataset, actuator: Mappin
         known = studied_ray(case, actuator, fea, direction, scales)
         if known is None:
             return solve_ray(direction, scales)
+        name = str(case.attrs.get("case", "?"))
         log.info(
             "ray to (%.1f, %.1f) kPa: the FE study's case %s solved it on these load steps; read, not solved again",
             float(direction[0]),
             float(direction[1]),
-            case.attrs.get("case", "?"),
+            name,
         )
+        solve.read.append(f"ray to ({float(direction[0]):g}, {float(direction[1]):g}) kPa from {name}")
         return known
 
+    solve.read = []
     return solve

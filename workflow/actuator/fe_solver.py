@@ -12,10 +12,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from workflow import fem
-from workflow.common.provenance import config_sha256
+from workflow.common.rays import ray_config_sha256
 from workflow.common.runlog import solved
 
-__all__ = ["samples_from_paths", "make_solver", "ray_config_sha256", "studied_ray"]
+__all__ = ["samples_from_paths", "make_solver", "studied_ray"]
 
 log = logging.getLogger(__name__)
 
@@ -108,12 +108,6 @@ def samples_from_paths(
     }
 
 
-def ray_config_sha256(actuator: Mapping[str, Any]) -> str:
-    """Hash of the actuator config a ray is solved with, its Newton budget left out (a budget only ends a ray
-    early: a ray that reached its load was not touched by it)."""
-    return config_sha256({k: v for k, v in dict(actuator).items() if k != "iteration_budget"})
-
-
 def studied_ray(
     case: Any, actuator: Mapping[str, Any], fea: str, direction: Sequence[float], scales: np.ndarray
 ) -> dict[str, np.ndarray] | None:
@@ -124,8 +118,10 @@ def studied_ray(
     solved it on the same mesh and config with its load steps landing on the same load factors, and keeps both
     paths (``path_*``): the solver's path depends on nothing else (each path starts from its own analysis), so
     :func:`samples_from_paths` on them gives what solving the ray here gives.  Taken only when the model, the
-    element size, the contact switch, the config (:func:`ray_config_sha256`), the direction and the load factors
-    (to the bit) are the ray's and both paths reached their load.
+    element size, the contact switch, the config (:func:`workflow.common.rays.ray_config_sha256`), the direction
+    and the load factors (to the bit) are the ray's, both paths reached their load, and the ray's own Newton budget
+    (``actuator.iteration_budget``, None: none) is none or at least the case's (a ray that converged within the
+    case's budget converges alike within a larger one, not within a smaller).
     """
     if case is None or "path_status" not in case or "actuator_sha256" not in case.attrs:
         return None
@@ -139,6 +135,9 @@ def studied_ray(
         and np.array_equal(stops, np.asarray(scales, float))
         and bool((case["path_status"] == 0).all())
     )
+    budget, case_budget = actuator.get("iteration_budget"), case.attrs.get("iteration_budget", "none")
+    if budget is not None and (str(case_budget) == "none" or int(budget) < int(case_budget)):
+        return None
     if not same:
         return None
     paths = {}

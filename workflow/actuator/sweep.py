@@ -44,6 +44,7 @@ import xarray as xr
 
 from workflow.common.constants import SWEEP_SAMPLE_STATUS
 from workflow.common.provenance import open_result
+from workflow.common.rays import sweep_scales
 
 __all__ = ["SAMPLE_FIELDS", "ray_design", "shard_rays", "n_points_total", "run_shard", "merge_shards", "CHECK_FIELDS"]
 
@@ -122,7 +123,7 @@ def ray_design(p_max_kpa: float, n_ratios: int, n_pressures: int) -> dict[str, n
         raise ValueError("p_max_kpa must be positive")
     ratio = np.linspace(0.0, 1.0, n_ratios)
     direction = np.column_stack([np.full(n_ratios, float(p_max_kpa)), ratio * p_max_kpa])
-    scales = np.arange(1, n_pressures + 1) / n_pressures
+    scales = sweep_scales(n_pressures)
     return {"ratio": ratio, "direction_kpa": direction, "scales": scales}
 
 

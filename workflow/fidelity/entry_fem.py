@@ -16,10 +16,9 @@ import numpy as np
 import xarray as xr
 
 from workflow import fem
-from workflow.actuator.fe_solver import ray_config_sha256
-from workflow.actuator.sweep import ray_design
 from workflow.common.fidelity_choice import P_STUDY, FemCase, case_actuator
 from workflow.common.provenance import write_dataset
+from workflow.common.rays import ray_config_sha256, shared_stops
 from workflow.common.runlog import solved
 
 __all__ = ["write_fem_case"]
@@ -53,9 +52,7 @@ def write_fem_case(
 
     case = FemCase.parse(case_name)
     act = case_actuator(actuator, case, iteration_budget)
-    extra = ()
-    if sweep and np.isclose(float(sweep["p_max_kpa"]), max(p_top_kpa)):
-        extra = tuple(ray_design(float(sweep["p_max_kpa"]), 2, int(sweep["n_pressures"]))["scales"])
+    extra = shared_stops(p_top_kpa, sweep)  # () where the sweep's ray cannot be this one
     t0 = time.perf_counter()
     ds, deformed = fem.unit_check(act, (case.model,), p_top_kpa, extra_stops=extra, keep_paths=bool(extra))
     wall = time.perf_counter() - t0
