@@ -7,7 +7,7 @@ from snakemake.utils import validate
 
 from workflow import settings
 from workflow.authors_study import settings as authors_settings
-from workflow.common import fidelity_choice, rays, scheduling
+from workflow.common import fidelity_choice, scheduling
 from workflow.common.provenance import code_files, config_sha256
 
 validate(config, "../config/schema.yaml")
@@ -332,16 +332,11 @@ def get_fem_case_slice(wildcards):
 
 
 def get_fem_case_sweep(wildcards):
-    """Param function: the sweep config of the case's model where the sweep can read its P_B = 0 ray from the case,
-    else {} (and the case's rerun does not depend on the sweep): with fidelity.auto, for the coarser cases with
-    contact (workflow.common.fidelity_choice.shares_sweep_ray), when the study's points are samples of the sweep's
-    ray (workflow.common.rays.shared_stops)."""
+    """Param function: the sweep config the FE case lands its steps on ({}: none; workflow.common.fidelity_choice.case_sweep)."""
     case = fidelity_choice.FemCase.parse(wildcards.case)
     cases = fidelity_choice.fem_cases(config["fidelity"]["fem_cases"])
-    if not fidelity_auto() or not fidelity_choice.shares_sweep_ray(case, cases):
-        return {}
-    sweep = {k: config["sweep"][case.model][k] for k in ("p_max_kpa", "n_pressures")}
-    return sweep if rays.shared_stops(config["fidelity"]["p_top_kpa"], sweep) else {}
+    sweep = config["sweep"][case.model]
+    return fidelity_choice.case_sweep(case, cases, sweep, config["fidelity"]["p_top_kpa"], fidelity_auto())
 
 
 def get_fem_tolerances():

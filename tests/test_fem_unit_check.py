@@ -172,7 +172,7 @@ def test_the_sweep_reads_its_first_ray_from_a_study_case_that_landed_on_its_samp
 
 
 def test_only_the_coarser_contact_cases_share_the_sweep_ray():
-    from workflow.common.fidelity_choice import fem_cases, shares_sweep_ray
+    from workflow.common.fidelity_choice import case_sweep, fem_cases, shares_sweep_ray
 
     cases = fem_cases(
         [
@@ -183,6 +183,12 @@ def test_only_the_coarser_contact_cases_share_the_sweep_ray():
     )
     share = {c.name for c in cases if shares_sweep_ray(c, cases)}
     assert share == {"fem_2d_h1_contact", "fem_2d_h0.5_contact", "fem_3d_h2_contact", "fem_3d_h1.4_contact"}
+    # what the rule passes the case: the sweep only where a sweep can read the ray from it
+    sweep, pts = {"p_max_kpa": 300.0, "n_ratios": 11, "n_pressures": 10, "n_shards": 11}, [60.0, 180.0, 300.0]
+    assert case_sweep(cases[0], cases, sweep, pts, True) == {"p_max_kpa": 300.0, "n_pressures": 10}
+    assert case_sweep(cases[0], cases, sweep, pts, False) == {}  # fidelity.auto off: no sweep reads the study
+    assert case_sweep(cases[2], cases, sweep, pts, True) == {}  # the finest
+    assert case_sweep(cases[0], cases, dict(sweep, n_pressures=4), pts, True) == {}  # 60 kPa not a sample
 
 
 def test_the_study_lands_on_the_sweep_samples_only_where_its_ray_can_be_the_sweeps():

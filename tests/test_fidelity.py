@@ -45,7 +45,7 @@ def test_fem_case_queue_priority_starts_the_longest_cases_first_and_before_every
     assert prio == sorted(prio, reverse=True) and len(set(prio)) == len(prio)
     assert min(prio) > 10
     # the sweeps, which every plan waits for, after the study and ahead of the studies nothing waits for (0), below
-    # the checks; the 3D shards in the order of their rays' cost (shard 0: P_B = 0, the longest), above the 2D ones
+    # the checks; the 3D shards in the order of their rays' cost (shard 0: P_B = 0, the longest solved), above the 2D ones
     p3 = [scheduling.sweep_shard_priority("3d", k, 6) for k in range(6)]
     p2 = [scheduling.sweep_shard_priority("2d", k, 11) for k in range(11)]
     assert p3 == sorted(p3, reverse=True) and p3[0] > p3[-1] > max(p2) >= min(p2) > 0

@@ -125,32 +125,27 @@ def studied_ray(
     """
     if case is None or "path_status" not in case or "actuator_sha256" not in case.attrs:
         return None
-    stops = np.atleast_1d(np.asarray(case.attrs.get("path_stops", []), float))
-    p_top = float(case.attrs.get("path_p_top_kpa", np.nan))
+    budget, case_budget = actuator.get("iteration_budget"), str(case.attrs.get("iteration_budget", "none"))
     same = (
         str(case.attrs.get("model")) == fea
         and str(case.attrs["actuator_sha256"]) == ray_config_sha256(actuator)
         and float(direction[1]) == 0.0
-        and float(direction[0]) == p_top
-        and np.array_equal(stops, np.asarray(scales, float))
+        and float(direction[0]) == float(case["p_top_kpa"].max())
+        and np.array_equal(np.atleast_1d(np.asarray(case.attrs.get("path_stops", []), float)), scales)
         and bool((case["path_status"] == 0).all())
+        and (budget is None or (case_budget != "none" and int(budget) >= int(case_budget)))
     )
-    budget, case_budget = actuator.get("iteration_budget"), case.attrs.get("iteration_budget", "none")
-    if budget is not None and (str(case_budget) == "none" or int(budget) < int(case_budget)):
-        return None
     if not same:
         return None
+    steps = [str(k) for k in case.data_vars if str(k).startswith("path_") and "step" in case[k].dims]
     paths = {}
     for c in ("free", "blocked"):
-        lam = case["path_lam"].sel(case=c).values
-        keep = np.isfinite(lam)
-        steps = [str(k) for k in case.data_vars if str(k).startswith("path_") and "step" in case[k].dims]
+        keep = np.isfinite(case["path_lam"].sel(case=c).values)
         cols = {k[len("path_") :]: case[k].sel(case=c).values[keep] for k in steps}
-        history = [{k: float(v[j]) for k, v in cols.items()} for j in range(int(keep.sum()))]
         paths[c] = {
             "status": int(case["path_status"].sel(case=c)),
             "wall_time_s": float(case["path_wall_time_s"].sel(case=c)),
-            "history": history,
+            "history": [{k: float(v[j]) for k, v in cols.items()} for j in range(int(keep.sum()))],
         }
     return samples_from_paths(direction, scales, paths["free"], paths["blocked"])
 

@@ -15,6 +15,8 @@ from typing import Mapping, Sequence
 import numpy as np
 import xarray as xr
 
+from workflow.common.rays import shared_stops
+
 __all__ = [
     "FemCase",
     "fem_cases",
@@ -25,6 +27,7 @@ __all__ = [
     "check_choice",
     "P_STUDY",
     "shares_sweep_ray",
+    "case_sweep",
 ]
 
 
@@ -72,6 +75,18 @@ def shares_sweep_ray(case: FemCase, cases: Sequence[FemCase]) -> bool:
         return False
     finest = min(c.h_mm for c in cases if c.model == case.model and c.contact)
     return case.h_mm > finest
+
+
+def case_sweep(case: FemCase, cases: Sequence[FemCase], sweep: Mapping, p_top_kpa: Sequence[float], auto: bool) -> dict:
+    """The part of the model's ``sweep`` config (``p_max_kpa``, ``n_pressures``) the FE case ``case`` lands its
+    steps on, or {} where no sweep can read its P_B = 0 ray from the case (``auto``: ``fidelity.auto``, without which
+    the sweeps take the config's mesh and never read the study): the case must share the ray
+    (:func:`shares_sweep_ray`) and the study points ``p_top_kpa`` (kPa) be samples of it
+    (:func:`workflow.common.rays.shared_stops`).  A case given {} does not rerun when the sweep changes."""
+    if not auto or not shares_sweep_ray(case, cases):
+        return {}
+    part = {k: sweep[k] for k in ("p_max_kpa", "n_pressures")}
+    return part if shared_stops(p_top_kpa, part) else {}
 
 
 def case_actuator(actuator: Mapping, case: FemCase, iteration_budget: int | None = None) -> dict:

@@ -40,8 +40,9 @@ def sweep_shard_priority(fea: str, shard: int, n_shards: int) -> int:
 
     3D shards first, in the order of their rays' cost: ray k of the ratios P_B / P_T = 0 .. 1 is dealt to shard
     k mod ``n_shards``, and the more one-sided the pressure, the further the unit bends and the longer its ray runs
-    (145 s at P_B = 0 down to 79 s at P_B = P_T in the last cold run), so shard 0 starts first (4 .. 2); the 2D
-    shards (5-11 s each) at 1.
+    (145 s at P_B = 0 down to 79 s at P_B = P_T solved), so the shards start in order (4 .. 2); the 2D shards
+    (5-11 s each) at 1.  With ``fidelity.auto`` shard 0 reads its ray from the FE study (0.1 s), and shard 1 is the
+    first that solves.
     """
     if fea == "3d":
         return 2 + (2 * (n_shards - 1 - shard)) // max(n_shards - 1, 1)

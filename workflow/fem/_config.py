@@ -260,8 +260,7 @@ def unit_check(
     )
     if keep_paths:
         ds = ds.assign(_path_variables(paths, len(models), len(cases)))
-        ds.attrs["path_stops"] = np.asarray(stops)  # load factors of the rays' end pressure
-        ds.attrs["path_p_top_kpa"] = pmax
+        ds.attrs["path_stops"] = np.asarray(stops)  # load factors of the rays' end pressure, max(p_top_kpa)
     return ds, deformed
 
 
