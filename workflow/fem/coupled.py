@@ -393,7 +393,8 @@ def solve_coupled(
     """Gravity first (ramped alone), then the group pressures ramped from zero with gravity held.
 
     ``u_gravity``: a converged gravity state (``CoupledResult.state``) to start the pressure phase from
-    (skips the gravity phase; the droop angles are then measured on it).
+    (skips the gravity phase; the droop angles are then measured on it).  With every pressure zero the pressure
+    phase is that state itself.
     Never raises for a failed path: the last converged state is measured.
     """
     t0 = time.perf_counter()
@@ -418,10 +419,13 @@ def solve_coupled(
     droop = np.degrees([parts["hinges"][j].angle(x) for j in JOINTS])
     if status == 0:
         phase = "pressure"
-        rp = solve_path(model, p_ref, opts, _measure(setup, model, parts, p_ref, 1.0), u0=u)
-        iters, steps = iters + rp.iterations, steps + rp.steps
-        history += [dict(h, phase="pressure") for h in rp.history]
-        u, status, reason, lam = rp.state, rp.status, rp.reason, rp.lam
+        # at zero pressure the converged gravity state is the pressure phase's equilibrium already (the same model
+        # at full weight): its path would only converge it again at every load step (49 steps in the gravity solve)
+        if any(float(p) != 0.0 for pair in pressures_kpa.values() for p in pair):
+            rp = solve_path(model, p_ref, opts, _measure(setup, model, parts, p_ref, 1.0), u0=u)
+            iters, steps = iters + rp.iterations, steps + rp.steps
+            history += [dict(h, phase="pressure") for h in rp.history]
+            u, status, reason, lam = rp.state, rp.status, rp.reason, rp.lam
     x = model.positions(u, p_ref)
     th = np.array([parts["hinges"][j].angle(x) for j in JOINTS])
     lam_g = 1.0 if phase == "pressure" else lam
