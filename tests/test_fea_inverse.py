@@ -149,3 +149,63 @@ def test_inverse_says_so_when_its_steps_shrink_after_stalled_solves():
     )
     assert not res.reached and "shrank" in res.reason and res.blocking == []
     assert res.solves < 20 and not any(res.ok[1:])
+
+
+@pytest.mark.parametrize("target", [[90.0, 0.0, 0.0], [90.0, 90.0, 0.0], [0.0, 80.0, 60.0], [-20.0, 10.0, 0.0]])
+def test_out_of_reach_test_spends_no_solve_on_a_target_inside_the_bounds(target):
+    # a reachable target is reached as without the test, with the same solves
+    forward, _ = _double()
+    E = tie_matrix(8, [(0, 2), (1, 3)])
+    p0 = np.zeros(8)
+    y0, ok0 = forward(p0)
+    kw = dict(lo=0.0, hi=P_MAX, tol=2.0, budget=6, E=E)
+    res = bounded_broyden(forward, p0, y0, ok0, target, _chain_jacobian(), out_of_reach=3.0, **kw)
+    ref = bounded_broyden(_double()[0], p0, y0, ok0, target, _chain_jacobian(), **kw)
+    assert res.reached, res.reason
+    assert res.solves == ref.solves
+    np.testing.assert_allclose(res.pressures_kpa[res.best], ref.pressures_kpa[ref.best])
+
+
+def test_a_target_out_of_reach_inside_the_bounds_costs_no_forward_solve():
+    # the chain knows the PIP span is weak (0.12 deg/kPa): 90 deg needs ~750 kPa, 300 kPa give 36 deg at most;
+    # the FEA check's TGE2/TGE3/TGE5 plans sit at this: a group at its limit, its joint 50-90 deg short
+    forward, calls = _double(stiff=np.array([0.55, 0.12, 0.35]))
+    J = _chain_jacobian() / 1.3
+    J[1, 4], J[1, 5] = 0.12, -0.12
+    p0 = np.zeros(8)
+    y0, ok0 = forward(p0)
+    res = bounded_broyden(
+        forward, p0, y0, ok0, [0.0, 90.0, 0.0], J, lo=0.0, hi=P_MAX, tol=2.0, budget=10, out_of_reach=3.0
+    )
+    assert not res.reached and res.solves == 0 and len(calls) == 1
+    assert "bounds block progress" in res.reason and "misses PIP by 54.0 deg" in res.reason, res.reason
+    assert res.blocking == ["P_PIP_B"]  # already empty; its top chamber is not yet at the limit
+    # without the test the same inverse spends solves to learn it
+    off = bounded_broyden(
+        _double(stiff=np.array([0.55, 0.12, 0.35]))[0],
+        p0,
+        y0,
+        ok0,
+        [0.0, 90.0, 0.0],
+        J,
+        lo=0.0,
+        hi=P_MAX,
+        tol=2.0,
+        budget=10,
+    )
+    assert not off.reached and off.solves >= 1
+
+
+def test_the_out_of_reach_test_learns_from_the_solves_when_the_chain_is_wrong():
+    # the chain thinks the weak PIP span is strong: the first solves show it is not, Broyden's update says so, and
+    # the inverse stops on the out-of-reach test before the bounded step shrinks (the test above's stop, sooner)
+    forward, _ = _double(stiff=np.array([0.55, 0.12, 0.35]))
+    p0 = np.zeros(8)
+    y0, ok0 = forward(p0)
+    kw = dict(lo=0.0, hi=P_MAX, tol=2.0, budget=10)
+    res = bounded_broyden(forward, p0, y0, ok0, [0.0, 90.0, 0.0], _chain_jacobian(), out_of_reach=3.0, **kw)
+    off = bounded_broyden(
+        _double(stiff=np.array([0.55, 0.12, 0.35]))[0], p0, y0, ok0, [0.0, 90.0, 0.0], _chain_jacobian(), **kw
+    )
+    assert not res.reached and "linearised response still misses PIP" in res.reason
+    assert 1 <= res.solves <= off.solves

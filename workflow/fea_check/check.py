@@ -38,7 +38,8 @@ Correction step (``correction.max_iterations`` > 0).  For an exercise the
 FEA misses, a bounded quasi-Newton inverse on the FEA (:mod:`.correction`):
 the chain's Jacobian as the first estimate, Broyden's update from each FEA
 solve, at most ``max_iterations`` solves; it stops early when the bounds block
-progress (a step changes no pressure by ``min_change_kpa``).  The best
+progress (a step changes no pressure by ``min_change_kpa``, or the chain's linearised response misses the target by
+more than ``out_of_reach`` tolerances anywhere inside the bounds).  The best
 check (fewest joints out of tolerance, then the least total error) is kept
 as ``corrected_*``; every iteration's pressures and angles are stored.
 """

@@ -5,7 +5,8 @@ update from every FEA solve, the pressures within zero and the plan's limit,
 P_CMC tied to P_MCP where the plan ties them, and in the directions the three
 angles leave free the planner's objective (least pressure; the planners that
 co-pressurise on purpose stay near the plan).  It stops at the tolerance, at the budget of FEA
-solves, or where the bounds block progress (naming the chambers).  An exercise
+solves, or where the bounds block progress (naming the chambers): no step changes a pressure, or the chain's
+linearised response cannot come near the target anywhere inside the bounds.  An exercise
 counts as reached only when the FEA reaches it.
 
 Pressures kPa, angles deg.
@@ -80,6 +81,7 @@ def correct_exercise(
     plan_opts: Mapping,
     max_iterations: int,
     min_change_kpa: float = 1.0,
+    out_of_reach: float | None = None,
 ) -> Correction:
     """The bounded quasi-Newton inverse on the FEA from the plan's check (see the module docstring).
 
@@ -89,7 +91,8 @@ def correct_exercise(
     pressures; ``plan_opts``: keywords of :func:`workflow.cascade.plan_exercise` (its ``p_max_kpa`` and
     ``tie_cmc_mcp`` bound and tie the pressures, its ``planner`` sets the objective in the directions the angles
     leave free); ``max_iterations``: FEA solves at most; ``min_change_kpa``: a
-    step that changes no pressure by this much means the bounds block progress.
+    step that changes no pressure by this much means the bounds block progress; ``out_of_reach`` (tolerances;
+    None: off): so does a target the linearised response misses by more than this anywhere inside the bounds.
     """
 
     target = np.asarray(target_deg, float)
@@ -152,6 +155,7 @@ def correct_exercise(
         E=tie,
         z_ref=z_ref,
         min_step_kpa=float(min_change_kpa),
+        out_of_reach=None if out_of_reach is None else float(out_of_reach),
     )
 
     # the kept iterate: the safety limits held first, then fewest joints off target (a stalled solve counts 3 more),

@@ -13,8 +13,11 @@ chain's Jacobian and is corrected by Broyden's update from each forward solve,
 J += (dy - J dp) dp^T / dp^T dp.  A failed forward solve halves that step, from the best iterate so far.
 
 It stops when every angle is within the tolerance (reached), when the budget of forward solves is spent, or when the
-bounds block progress: the bounded step changes no pressure by ``min_step_kpa`` while the target is missed; the
-chambers that block are those at a bound whose pressure the unbounded step would push past it.
+bounds block progress: the bounded step changes no pressure by ``min_step_kpa`` while the target is missed, or
+(``out_of_reach``) the linearised response J, over the whole box and with no step limit, still misses some angle by
+more than ``out_of_reach`` tolerances, so that no forward solve inside the bounds is expected to reach the target
+(the reduced-order chain the first J comes from bends more than the FEA at the same pressures, so it errs on the
+reachable side).  The chambers that block are those at a bound whose pressure the unbounded step would push past it.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from workflow.common.constants import PRESSURE_NAMES
+from workflow.common.constants import JOINTS, PRESSURE_NAMES
 
 __all__ = ["InverseResult", "bounded_broyden", "tie_matrix"]
 
@@ -64,6 +67,17 @@ def _score(err: np.ndarray) -> float:
     return float(np.max(np.abs(err))) if np.all(np.isfinite(err)) else np.inf
 
 
+def _blocking(J, err, z, lo_z, hi_z, E, names, min_step_kpa) -> tuple[list, list]:
+    """The free pressures at a bound that the unbounded least-squares step would push past it: their names (tied
+    ones joined by /) and 'name at value kPa' for the stop's reason."""
+    free = np.linalg.lstsq(J, err, rcond=None)[0]  # where the unbounded step would go
+    at_hi = (z >= hi_z - 1e-9) & (free > min_step_kpa)
+    at_lo = (z <= lo_z + 1e-9) & (free < -min_step_kpa)
+    cols = np.flatnonzero(at_hi | at_lo)
+    blocking = ["/".join(names[int(i)] for i in np.flatnonzero(E[:, c])) for c in cols]
+    return blocking, [f"{nm} at {z[c]:g} kPa" for nm, c in zip(blocking, cols)]
+
+
 def bounded_broyden(
     forward: Callable[[np.ndarray], tuple[np.ndarray, bool]],
     p0: np.ndarray,
@@ -81,14 +95,17 @@ def bounded_broyden(
     regularisation: float = 1e-3,
     max_step_kpa: float = 100.0,
     min_step_kpa: float = 1.0,
+    out_of_reach: float | None = None,
     names: Sequence[str] = PRESSURE_NAMES,
+    angle_names: Sequence[str] = JOINTS,
 ) -> InverseResult:
     """Pressures whose forward angles reach ``target`` within ``tol`` (see the module docstring).
 
     ``forward(p) -> (angles (3,), converged)``; ``p0`` (n,) the start with its forward result ``y0``, ``ok0``;
     ``J0`` (3, n) the first estimate of dy/dp (deg/kPa); ``lo``/``hi`` bounds on every pressure (kPa);
     ``budget`` forward solves at most; ``E`` (n, m) the tie (default: none); ``z_ref`` (m,) the planner's
-    preferred pressures (default 0: least pressure).
+    preferred pressures (default 0: least pressure); ``out_of_reach`` (tolerances; None: off) stops before a
+    forward solve when the linearised response cannot come that close to the target anywhere inside the bounds.
     """
     p0 = np.asarray(p0, float)
     n = p0.size
@@ -118,6 +135,19 @@ def bounded_broyden(
         if res.solves >= budget:
             res.reason = f"not reached within the budget of {budget} forward solve(s)"
             break
+        if out_of_reach is not None:
+            # the best the linearised response can do anywhere in the box: a miss of several tolerances there is
+            # out of reach of every step inside the bounds, and a forward solve would only confirm it
+            miss = err - J @ lsq_linear(J, err, bounds=(lo_z - best_z, hi_z - best_z + 1e-12)).x
+            k = int(np.argmax(np.abs(miss)))
+            if abs(miss[k]) > out_of_reach * tol:
+                res.blocking, where = _blocking(J, err, best_z, lo_z, hi_z, E, names, min_step_kpa)
+                res.reason = (
+                    f"the bounds block progress: inside them the linearised response still misses {angle_names[k]} "
+                    f"by {abs(miss[k]):.1f} deg after {res.solves} forward solve(s)"
+                    + (f" ({', '.join(where)})" if where else "")
+                )
+                break
         w = regularisation * float(np.sum(J * J)) / m
         A = np.vstack([J, np.sqrt(w) * np.eye(m)])
         b = np.concatenate([err, -np.sqrt(w) * (best_z - z_ref)])
@@ -131,12 +161,7 @@ def bounded_broyden(
             )
             break
         if np.max(np.abs(dz)) < min_step_kpa:
-            free = np.linalg.lstsq(J, err, rcond=None)[0]  # where the unbounded step would go
-            at_hi = (best_z >= hi_z - 1e-9) & (free > min_step_kpa)
-            at_lo = (best_z <= lo_z + 1e-9) & (free < -min_step_kpa)
-            cols = np.flatnonzero(at_hi | at_lo)
-            res.blocking = ["/".join(names[int(i)] for i in np.flatnonzero(E[:, c])) for c in cols]  # tied: a/b
-            where = [f"{nm} at {best_z[c]:g} kPa" for nm, c in zip(res.blocking, cols)]
+            res.blocking, where = _blocking(J, err, best_z, lo_z, hi_z, E, names, min_step_kpa)
             res.reason = "the bounds block progress" + (f" ({', '.join(where)})" if where else "")
             break
         z_new = best_z + dz

@@ -302,7 +302,7 @@ def run_fea_check(
 
     ``ro_plan`` / ``ro_2d``: the reduced-order chain (``CascadeModel``) with
     the plan's and with the 2D unit surrogate; ``correction``: ``{max_iterations,
-    min_change_kpa}`` (needs ``ro_plan`` and ``plan_opts``, the keywords of
+    min_change_kpa, out_of_reach}`` (needs ``ro_plan`` and ``plan_opts``, the keywords of
     :func:`workflow.cascade.plan_exercise` the plan was made with).
     """
 
@@ -375,6 +375,7 @@ def run_fea_check(
                     plan_opts=plan_opts or {},
                     max_iterations=n_cor,
                     min_change_kpa=float((correction or {}).get("min_change_kpa", 1.0)),
+                    out_of_reach=(correction or {}).get("out_of_reach"),
                 )
             )
             log.info("%s: correction step: %s", name, corrections[-1].stop_reason)
