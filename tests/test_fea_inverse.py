@@ -152,7 +152,7 @@ def test_inverse_says_so_when_its_steps_shrink_after_stalled_solves():
 
 
 @pytest.mark.parametrize("target", [[90.0, 0.0, 0.0], [90.0, 90.0, 0.0], [0.0, 80.0, 60.0], [-20.0, 10.0, 0.0]])
-def test_out_of_reach_test_spends_no_solve_on_a_target_inside_the_bounds(target):
+def test_the_out_of_reach_test_changes_nothing_for_a_reachable_target(target):
     # a reachable target is reached as without the test, with the same solves
     forward, _ = _double()
     E = tie_matrix(8, [(0, 2), (1, 3)])
