@@ -104,6 +104,9 @@ rule fidelity_check:
     params:
         patient=get_patient,
         check=config["fidelity"]["check"],
+        # coarsest_first stops at the first mesh within this tolerance of the finest (what the check's choice asks)
+        tolerance_deg=config["fidelity"]["tolerance"]["check_deg"],
+        penetration_bound_mm=config["fea_check"]["penetration_bound_mm"],
         fea_check=fea_check_cfg(),
         actuator=config["actuator"],
         cascade=cascade_cfg_without(),

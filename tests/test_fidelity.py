@@ -236,3 +236,52 @@ def test_richardson_recovers_an_order_and_refuses_growing_differences():
     # equal ratios: growing differences get the negative order of the signed equation
     r = FD.richardson([1.0, 2.0, 4.0], [1.0, 1.2, 1.3])
     assert not r.asymptotic and r.order == pytest.approx(-1.0, rel=1e-8)
+
+
+def test_coarsest_first_mesh_search_solves_the_finest_then_stops_at_the_first_mesh_within_tolerance():
+    # meshes 3 / 2.5 / 2 / 1.5 mm (index 0 coarsest); TGE1 and TGE2 angles per mesh
+    angles = {0: [[9.0, 0, 1], [37.0, 12, 0]], 1: [[10.5, 0, 1], [38.0, 12.5, 0]], 2: [[9.8, 0, 1], [38.3, 12.6, 0]]}
+    angles[3] = [[9.6, 0, 1], [38.5, 12.6, 0]]
+    solved = []
+
+    def solve(i, bad=(), pen=0.01):
+        solved.append(i)
+        status = np.array([1 if i in bad else 0, 0])
+        return np.array(angles[i], float), status, np.full(2, pen)
+
+    # the coarsest is 1.5 deg off (TGE2): within 2 deg, so 2.5 and 2 mm are never solved
+    ang, status, pen, stop = fidelity_choice.search_meshes(4, 2, solve, "coarsest_first", tolerance_deg=2.0)
+    assert solved == [3, 0] and stop[0] == 0 and abs(stop[1] - 1.5) < 1e-12 and stop[2] == [1, 2]
+    assert np.all(status[1:3] == fidelity_choice.NOT_SOLVED) and np.isnan(ang[1:3]).all()
+    study = xr.Dataset(
+        {
+            "angle_deg": (("h_mm", "exercise", "joint"), ang),
+            "status": (("h_mm", "exercise"), status),
+            "wall_time_s": (("h_mm", "exercise"), np.where(np.isnan(ang[..., 0]), np.nan, 10.0)),
+        },
+        coords={"h_mm": [3.0, 2.5, 2.0, 1.5], "exercise": ["TGE1", "TGE2"]},
+    )
+    h, why = fidelity_choice.check_choice(study, 2.0, 2.0)
+    assert h == 3.0 and "2.5, 2 mm not solved" in why
+    # 1 deg: the coarsest misses (TGE2 1.5 deg), 2.5 mm misses (TGE1 0.9, TGE2 0.5: within) -> stops at 2.5 mm
+    solved.clear()
+    *_, stop = fidelity_choice.search_meshes(4, 2, solve, "coarsest_first", tolerance_deg=1.0)
+    assert solved == [3, 0, 1] and stop[0] == 1
+    # a coarse mesh that did not converge, or penetrates beyond the bound, is passed over
+    solved.clear()
+    *_, stop = fidelity_choice.search_meshes(4, 2, lambda i: solve(i, bad=(0,)), "coarsest_first", tolerance_deg=2.0)
+    assert solved == [3, 0, 1] and stop[0] == 1
+    solved.clear()
+    *_, stop = fidelity_choice.search_meshes(
+        4, 2, lambda i: solve(i, pen=0.2), "coarsest_first", tolerance_deg=2.0, penetration_bound_mm=0.1
+    )
+    assert solved == [3, 0, 1, 2] and stop is None
+    # a failed finest is no reference: every mesh is solved; "all" solves every mesh, coarsest first
+    solved.clear()
+    *_, stop = fidelity_choice.search_meshes(4, 2, lambda i: solve(i, bad=(3,)), "coarsest_first", tolerance_deg=2.0)
+    assert solved == [3, 0, 1, 2] and stop is None
+    solved.clear()
+    *_, stop = fidelity_choice.search_meshes(4, 2, solve, "all", tolerance_deg=2.0)
+    assert solved == [0, 1, 2, 3] and stop is None
+    with pytest.raises(ValueError, match="coarsest_first"):
+        fidelity_choice.mesh_order(4, "finest_first")

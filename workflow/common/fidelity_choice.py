@@ -3,14 +3,15 @@
 An FE case's name and config (:class:`FemCase`), the cheapest method within a
 tolerance (:func:`cheapest_within`), and the two readers the rules use: the
 unit mesh the FE study chose (:func:`apply_fem_choice`) and the FEA check's
-mesh (:func:`check_choice`).  Pure functions on configs and small datasets.
+mesh (:func:`check_choice`), and the order in which the check's mesh study solves its meshes and where it may
+stop (:func:`search_meshes`).  Pure functions on configs and small datasets.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import xarray as xr
@@ -18,6 +19,10 @@ import xarray as xr
 from workflow.common.rays import shared_stops
 
 __all__ = [
+    "NOT_SOLVED",
+    "mesh_order",
+    "search_meshes",
+    "within_reference",
     "FemCase",
     "fem_cases",
     "case_actuator",
@@ -181,6 +186,76 @@ def apply_fem_choice(actuator: Mapping, choice: xr.Dataset | None, model: str) -
     return case_actuator(act, case), {"fidelity": case.name, "fidelity_reason": str(row["choice_reason"].values)}
 
 
+#: ``status`` of a mesh the study left out (search ``coarsest_first``: a coarser mesh met the tolerance first).
+NOT_SOLVED = -1
+
+
+def mesh_order(n: int, search: str) -> list[int]:
+    """Order in which the check's mesh study solves its ``n`` meshes, indexed coarsest (0) to finest (n - 1).
+
+    ``"all"``: coarsest to finest.  ``"coarsest_first"``: the finest first (every
+    other mesh is measured against it), then the rest from the coarsest up, so
+    that the study can stop at the first that meets the tolerance: on a run
+    whose coarsest mesh qualifies, two meshes are solved instead of ``n``.
+    """
+    if search == "all":
+        return list(range(n))
+    if search == "coarsest_first":
+        return [n - 1] + list(range(n - 1))
+    raise ValueError(f"fidelity.check.search: {search!r} is neither 'all' nor 'coarsest_first'")
+
+
+def search_meshes(
+    n: int,
+    n_exercises: int,
+    solve_mesh: Callable[[int], tuple[np.ndarray, np.ndarray, np.ndarray]],
+    search: str,
+    *,
+    tolerance_deg: float,
+    penetration_bound_mm: float = np.inf,
+):
+    """Run the check's mesh study in :func:`mesh_order`; with ``coarsest_first`` stop at the first mesh that
+    :func:`within_reference` accepts against the finest.
+
+    ``solve_mesh(i)`` -> (angles (exercise, joint) deg, statuses (exercise,), penetrations (exercise,) mm) of mesh i
+    (0 coarsest).  Returns (angles (mesh, exercise, joint), statuses, penetrations, stop) where the meshes left out
+    keep :data:`NOT_SOLVED` and NaN and ``stop`` is (the accepted mesh, its largest angle difference in deg, the
+    meshes left out) or None when every mesh was solved.  Where the finest fails, no mesh is accepted early and all
+    are solved (the choice then measures against the finest that converged).
+    """
+    ang = np.full((n, n_exercises, 3), np.nan)
+    status = np.full((n, n_exercises), NOT_SOLVED, dtype="i1")
+    pen = np.full((n, n_exercises), np.nan)
+    order = mesh_order(n, search)
+    for n_done, i in enumerate(order, start=1):
+        ang[i], status[i], pen[i] = solve_mesh(i)
+        if search == "coarsest_first" and 1 < n_done < len(order):
+            err = within_reference(ang, status, pen, i, n - 1, tolerance_deg, penetration_bound_mm)
+            if err is not None:
+                return ang, status, pen, (i, err, order[n_done:])
+    return ang, status, pen, None
+
+
+def within_reference(
+    ang: np.ndarray,
+    status: np.ndarray,
+    pen: np.ndarray,
+    i: int,
+    ref: int,
+    tolerance_deg: float,
+    penetration_bound_mm: float,
+) -> float | None:
+    """Largest |angle difference| (deg) of mesh ``i`` from mesh ``ref`` if mesh i qualifies as the check's mesh:
+    every exercise converged at both, i's penetration within the bound and the difference within the tolerance;
+    None otherwise.  ``ang`` (mesh, exercise, joint), ``status`` and ``pen`` (mesh, exercise)."""
+    if np.any(status[ref] != 0) or np.any(status[i] != 0):
+        return None
+    if np.any(pen[i] > penetration_bound_mm):  # as check_choice: beyond the bound it is no valid check
+        return None
+    err = float(np.max(np.abs(ang[i] - ang[ref])))
+    return err if err <= tolerance_deg else None
+
+
 def check_choice(
     study: xr.Dataset | None, tolerance_deg: float, h_config_mm: float, penetration_bound_mm: float = np.inf
 ) -> tuple[float, str]:
@@ -198,7 +273,10 @@ def check_choice(
     ok = np.all(c["status"].values == 0, axis=1)
     if "max_penetration_mm" in c:  # a mesh whose contact penetrates beyond the bound is not a valid check
         ok &= ~np.any(c["max_penetration_mm"].values > penetration_bound_mm, axis=1)
-    wall = np.nanmean(c["wall_time_s"].values, axis=1)
+    w = c["wall_time_s"].values
+    solved_any = np.isfinite(w).any(axis=1)  # a mesh the study left out (NOT_SOLVED) has no time
+    wall = np.full(hs.size, np.nan)
+    wall[solved_any] = np.nanmean(w[solved_any], axis=1)
     ex = ", ".join(str(e) for e in c["exercise"].values)
     if not ok.any():
         return float(h_config_mm), f"fea_check.h_actuator_mm = {h_config_mm:g}: no mesh of the check study qualified"
@@ -206,6 +284,9 @@ def check_choice(
     err = np.where(ok, np.max(np.abs(ang - ang[r]), axis=(1, 2)), np.nan)
     ch = cheapest_within("fea_check", [f"check_h{h:g}" for h in hs], wall, err, tolerance_deg, converged=ok, unit="deg")
     pen = "" if not np.isfinite(penetration_bound_mm) else f", penetration <= {penetration_bound_mm:g} mm"
+    left = hs[np.all(c["status"].values == NOT_SOLVED, axis=1)]
+    if left.size:
+        pen += f"; h = {', '.join(f'{h:g}' for h in left)} mm not solved: a coarser mesh qualified first"
     return float(
         hs[[f"check_h{h:g}" for h in hs].index(ch.method)]
     ), f"{ch.reason} (study: {ex}, finest h = {hs[r]:g} mm{pen})"

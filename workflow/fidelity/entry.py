@@ -25,7 +25,7 @@ from workflow.actuator.unit_model import UnitModel
 from workflow.cascade.patient import patient_cascade, patient_finger, plan_limit, plan_options
 from workflow.cascade.planning import plan_patient
 from workflow.common import fidelity_choice
-from workflow.common.fidelity_choice import P_STUDY
+from workflow.common.fidelity_choice import NOT_SOLVED, P_STUDY
 from workflow.common.provenance import open_result, write_dataset
 from workflow.fidelity import analysis as FD
 from workflow.fidelity.plots import plot_speed_accuracy
@@ -239,6 +239,8 @@ def write_speed_accuracy(
 
     if check_nc:
         chk = open_result(check_nc)
+        # a mesh the coarsest-first search left out has no time or error to chart
+        chk = chk.isel(h_mm=~np.all(chk["status"].values == NOT_SOLVED, axis=1))
         hs = chk["h_mm"].values
         for e in chk["exercise"].values:
             c = chk.sel(exercise=e)

@@ -19,6 +19,7 @@ from workflow.actuator.unit_model import load_unit_model
 from workflow.cascade.model import solve_equilibrium
 from workflow.cascade.patient import patient_cascade
 from workflow.common.constants import JOINTS
+from workflow.common.fidelity_choice import search_meshes
 from workflow.common.provenance import write_dataset
 from workflow.common.runlog import solved
 from workflow.fea_check.applied import applied_limit, pressures_2d
@@ -53,6 +54,9 @@ def write_check_study(
     anthropometry: Mapping,
     unit_model_cfg: Mapping,
     config_slice: Any,
+    search: str = "all",
+    tolerance_deg: float = np.inf,
+    penetration_bound_mm: float = np.inf,
     rule: str = "fidelity_check",
 ) -> xr.Dataset:
     """Rule ``fidelity_check``: the FEA check of ``exercises`` at each element size (actuator = finger h).
@@ -61,6 +65,13 @@ def write_check_study(
     shared out over its exercises, plus the pressure phase), DOFs, status and
     contact penetration; the chains' predictions (the plan's and the 2D
     unit's at the applied pressures) with their time as the cheap stand-ins.
+
+    ``search``: ``"all"`` solves every mesh; ``"coarsest_first"`` solves the
+    finest (the reference) and then the others from the coarsest up, and stops
+    at the first whose angles are within ``tolerance_deg`` of the reference with
+    every exercise converged and its penetration within ``penetration_bound_mm``
+    (see :func:`mesh_order`); the meshes left out keep status
+    :data:`NOT_SOLVED` and NaN values.
     """
 
     s = load_patient_setup(
@@ -80,11 +91,13 @@ def write_check_study(
     solver = dict(actuator_cfg.get("solver", {}))
     solver.update(dict(fea_cfg.get("solver", {})))
     hs = sorted((float(h) for h in h_mm), reverse=True)
-    shape = (len(hs), len(ex))
-    ang = np.full(shape + (3,), np.nan)
-    wall, pen = np.full(shape, np.nan), np.full(shape, np.nan)
-    ndofs, status = np.zeros(len(hs), dtype="i4"), np.zeros(shape, dtype="i1")
-    for i, h in enumerate(hs):
+    wall = np.full((len(hs), len(ex)), np.nan)
+    ndofs = np.zeros(len(hs), dtype="i4")
+
+    def solve_mesh(i: int):
+        """Angles (exercise, joint), statuses and penetrations of the check at mesh i (wall times and DOFs kept)."""
+        h = hs[i]
+        ang_i, status_i, pen_i = np.full((len(ex), 3), np.nan), np.zeros(len(ex), dtype="i1"), np.full(len(ex), np.nan)
         t0 = time.perf_counter()
         fea = build_patient_fea(
             finger,
@@ -99,22 +112,37 @@ def write_check_study(
         ndofs[i] = grav.ndofs
         for k, e in enumerate(ex):
             if grav.status != 0:
-                ang[i, k], status[i, k], wall[i, k] = grav.joint_angles_deg, max(1, grav.status), t_grav
+                ang_i[k], status_i[k], wall[i, k] = grav.joint_angles_deg, max(1, grav.status), t_grav
                 continue
             c = check_exercise(fea, e, p2[k], solver, gravity=grav)
-            ang[i, k], status[i, k] = c.angle_deg, c.result.status
-            wall[i, k], pen[i, k] = t_grav + c.wall_time_s, c.result.max_penetration_mm
+            ang_i[k], status_i[k] = c.angle_deg, c.result.status
+            wall[i, k], pen_i[k] = t_grav + c.wall_time_s, c.result.max_penetration_mm
             log.info(
                 "check %s at h = %g mm (%d dofs): %s deg, status %d, %.1f s, penetration %.3f mm",
                 e,
                 h,
                 ndofs[i],
-                np.round(ang[i, k], 2),
-                status[i, k],
+                np.round(ang_i[k], 2),
+                status_i[k],
                 wall[i, k],
-                pen[i, k],
-                extra=solved(status[i, k] != 0),
+                pen_i[k],
+                extra=solved(status_i[k] != 0),
             )
+        return ang_i, status_i, pen_i
+
+    ang, status, pen, stop = search_meshes(
+        len(hs), len(ex), solve_mesh, search, tolerance_deg=tolerance_deg, penetration_bound_mm=penetration_bound_mm
+    )
+    if stop is not None:
+        i, err, left = stop
+        log.info(
+            "mesh study: h = %g mm is within %g deg of the finest (%.3g deg); h = %s mm left out (search %s)",
+            hs[i],
+            tolerance_deg,
+            err,
+            ", ".join(f"{hs[j]:g}" for j in left),
+            search,
+        )
     chains = {}
     plan_unit = {"2d": surrogate_2d, "3d": surrogate_3d}[cascade_cfg.get("surrogate", "3d")]
     for name, path, p in (("check_chain_plan", plan_unit, p3), ("check_chain_2d", surrogate_2d, p2)):
@@ -141,7 +169,11 @@ def write_check_study(
                 },
             ),
             "ndofs": ("h_mm", ndofs, {"units": "1", "long_name": "degrees of freedom"}),
-            "status": (("h_mm", "exercise"), status, {"units": "1", "long_name": "solver status (0 = converged)"}),
+            "status": (
+                ("h_mm", "exercise"),
+                status,
+                {"units": "1", "long_name": "solver status (0 = converged, -1 = not solved: a coarser mesh qualified)"},
+            ),
             "max_penetration_mm": (
                 ("h_mm", "exercise"),
                 pen,
@@ -172,7 +204,7 @@ def write_check_study(
             "chamber": plan["chamber"].values,
         },
     )
-    ds.attrs.update({"exercises": " ".join(ex), "patient": patient_name})
+    ds.attrs.update({"exercises": " ".join(ex), "patient": patient_name, "search": search})
     write_dataset(
         ds,
         out,

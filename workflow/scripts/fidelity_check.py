@@ -21,5 +21,8 @@ write_check_study(
     anthropometry=p.anthropometry,
     unit_model_cfg=p.unit_model,
     config_slice=p.config_slice,
+    search=p.check.get("search", "all"),
+    tolerance_deg=p.tolerance_deg,
+    penetration_bound_mm=p.penetration_bound_mm,
     rule=snakemake.rule,
 )  # noqa: F821
