@@ -211,6 +211,52 @@ def test_real_solver_samples_a_ray_at_its_scales():
     assert 0 < out["bending_moment_nm"][0] < out["bending_moment_nm"][1]
 
 
+def test_diagonal_ray_takes_the_blocked_moment_from_the_mirror_symmetry(monkeypatch):
+    """P_T = P_B on the symmetric unit: the blocked case is not solved, its moment is zero, and solving it gives zero
+    to round-off (the symmetry the short-cut rests on); a mesh that is not its own mirror image solves it."""
+    from workflow import fem
+
+    act = {"mesh": {"h_2d_mm": 2.0}}
+    calls = []
+    real = fem.solve_unit_from_config
+
+    def counting(actuator, dim, pt, pb, case, **kw):
+        calls.append(case)
+        return real(actuator, dim, pt, pb, case, **kw)
+
+    monkeypatch.setattr(fem, "solve_unit_from_config", counting)
+    scales = np.array([0.5, 1.0])
+    out = fe_solver.make_solver("2d", act)((60.0, 60.0), scales)
+    assert calls == ["free"] and list(out["status"]) == [0, 0]
+    assert np.all(out["bending_moment_nm"] == 0.0)
+    assert np.all(np.abs(out["bending_angle_deg"]) < 1e-8)
+    assert np.all(out["min_pocket_area_mm2"] > 0)  # the checks come from the free case
+    # the blocked case solved: zero to round-off, against the moment of the (60, 0) ray
+    solved = real(act, 2, 60.0, 60.0, "blocked", stops=tuple(scales))
+    one_sided = real(act, 2, 60.0, 0.0, "blocked")
+    assert solved.status == 0 and abs(solved.bending_moment_nm) < 1e-9 * abs(one_sided.bending_moment_nm)
+    # not symmetric (a node moved): both cases solved
+    calls.clear()
+    mesh = fem.unit_mesh_from_config(act, 2)
+    mesh.mesh.p[1, 7] += 0.01
+    monkeypatch.setattr(fem, "unit_mesh_from_config", lambda *a, **k: mesh)
+    assert not fem.top_bottom_symmetric(mesh)
+    fe_solver.make_solver("2d", act)((20.0, 20.0), np.array([1.0]))
+    assert calls == ["free", "blocked"]
+
+
+def test_the_3d_unit_is_its_own_mirror_image_until_a_material_or_a_cavity_differs():
+    from workflow import fem
+
+    mesh = fem.unit_mesh_from_config({"mesh": {"h_3d_mm": 4.0}}, 3)
+    assert fem.top_bottom_symmetric(mesh)
+    mesh.material[0] = 1 - mesh.material[0]
+    assert not fem.top_bottom_symmetric(mesh)
+    mesh.material[0] = 1 - mesh.material[0]
+    mesh.facets["cavity_bottom"] = mesh.facets["cavity_bottom"][1:]
+    assert not fem.top_bottom_symmetric(mesh)
+
+
 @pytest.mark.slow
 def test_snakemake_resumes_a_missing_shard_and_builds_downstream(tmp_path, repo):
     """Snakemake level: shards from the double stand in for the FE sweep (make_solver is not wired yet).

@@ -48,7 +48,7 @@ from ._assembly import SolidAssembler
 from ._config import layer_options, solve_unit_from_config, unit_check, unit_mesh_from_config
 from ._contact import ContactPair
 from ._material import mooney_rivlin_isochoric, neo_hooke_compressible
-from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh, layer_counts
+from ._mesh import DEFAULT_GEOMETRY, UnitMesh, build_grid_mesh, build_unit_mesh, layer_counts, top_bottom_symmetric
 from ._overlap import overlap_depth, overlap_measures, pocket_sizes
 from ._pressure import pressure_load
 from ._restarts import cumulative_attempts, first_converged, separate_attempts
@@ -114,6 +114,7 @@ __all__ = [
     "solve_path",
     "solve_unit",
     "solve_unit_from_config",
+    "top_bottom_symmetric",
     "unit_check",
     "unit_mesh_from_config",
     "unit_model",

@@ -50,6 +50,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 import skfem
+from scipy.spatial import cKDTree
 
 from ._overlap import boundary_faces
 
@@ -61,6 +62,7 @@ __all__ = [
     "build_grid_mesh",
     "layer_counts",
     "round_corners",
+    "top_bottom_symmetric",
 ]
 
 #: Table 6 values used by the unit model, mm.
@@ -147,6 +149,39 @@ class UnitMesh:
     def length(self) -> float:
         g = self.geometry
         return g["n_chambers"] * g["depth"] + (g["n_chambers"] - (0 if self.end_gaps else 1)) * g["gap"]
+
+
+def top_bottom_symmetric(um: UnitMesh, tol_mm: float = 1e-8) -> bool:
+    """Whether the unit mesh is its own mirror image across the paper layer's mid-plane (y = mean of the extreme y).
+
+    Nodes, each cell's material and the top and bottom cavities must map onto each other (every other facet
+    set and node set is built from them).  Then a load with P_T = P_B is mirror symmetric too, and the unit
+    neither bends nor needs a couple to stay straight: its free angle and blocked moment are zero.
+    """
+    p = um.mesh.p
+    y0 = 0.5 * (p[1].min() + p[1].max())
+
+    def same(a: np.ndarray, b: np.ndarray) -> bool:
+        """The point sets a and b (dim, n) are equal to ``tol_mm`` (each point of b has its own match in a)."""
+        if a.shape != b.shape:
+            return False
+        dist, idx = cKDTree(a.T).query(b.T)
+        return bool(np.all(dist <= tol_mm) and np.unique(idx).size == idx.size)
+
+    def mirror(x: np.ndarray) -> np.ndarray:
+        out = x.copy()
+        out[1] = 2 * y0 - x[1]
+        return out
+
+    if not same(p, mirror(p)):
+        return False
+    cells = p[:, um.mesh.t].mean(axis=1)
+    for m in np.unique(um.material):
+        c = cells[:, um.material == m]
+        if not same(c, mirror(c)):
+            return False
+    top, bottom = (p[:, um.facets[k]].mean(axis=2) for k in ("cavity_top", "cavity_bottom"))  # facets (nf, k)
+    return same(top, mirror(bottom))
 
 
 def _divisions(breaks: np.ndarray, h: float, refine: int = 1) -> np.ndarray:
