@@ -318,7 +318,7 @@ def get_check_study_slice(wildcards):
     """Param function: the check's slice and the mesh study's settings (fidelity.check; with the coarsest-first
     search, the tolerance and penetration bound that decide where it stops)."""
     out = {**get_fea_check_slice(wildcards), "check": config["fidelity"]["check"]}
-    if config["fidelity"]["check"].get("search", "all") != "all":
+    if config["fidelity"]["check"].get("search", "coarsest_first") != "all":
         out["check_tolerance_deg"] = config["fidelity"]["tolerance"]["check_deg"]
         out["penetration_bound_mm"] = config["fea_check"]["penetration_bound_mm"]
     return out

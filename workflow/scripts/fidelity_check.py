@@ -21,7 +21,7 @@ write_check_study(
     anthropometry=p.anthropometry,
     unit_model_cfg=p.unit_model,
     config_slice=p.config_slice,
-    search=p.check.get("search", "all"),
+    search=p.check.get("search", "coarsest_first"),  # the schema default
     tolerance_deg=p.tolerance_deg,
     penetration_bound_mm=p.penetration_bound_mm,
     rule=snakemake.rule,
