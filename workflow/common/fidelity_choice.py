@@ -22,6 +22,7 @@ __all__ = [
     "NOT_SOLVED",
     "mesh_order",
     "search_meshes",
+    "valid_checks",
     "within_reference",
     "FemCase",
     "fem_cases",
@@ -236,6 +237,12 @@ def search_meshes(
     return ang, status, pen, None
 
 
+def valid_checks(status: np.ndarray, pen: np.ndarray, penetration_bound_mm: float) -> np.ndarray:
+    """Per mesh (rows of ``status`` and ``pen``, (mesh, exercise)): every exercise converged and no contact penetration
+    beyond the bound -- a mesh whose contact penetrates further is no valid check, however close its angles."""
+    return np.all(status == 0, axis=1) & ~np.any(pen > penetration_bound_mm, axis=1)
+
+
 def within_reference(
     ang: np.ndarray,
     status: np.ndarray,
@@ -248,9 +255,7 @@ def within_reference(
     """Largest |angle difference| (deg) of mesh ``i`` from mesh ``ref`` if mesh i qualifies as the check's mesh:
     every exercise converged at both, i's penetration within the bound and the difference within the tolerance;
     None otherwise.  ``ang`` (mesh, exercise, joint), ``status`` and ``pen`` (mesh, exercise)."""
-    if np.any(status[ref] != 0) or np.any(status[i] != 0):
-        return None
-    if np.any(pen[i] > penetration_bound_mm):  # as check_choice: beyond the bound it is no valid check
+    if np.any(status[ref] != 0) or not valid_checks(status[i : i + 1], pen[i : i + 1], penetration_bound_mm)[0]:
         return None
     err = float(np.max(np.abs(ang[i] - ang[ref])))
     return err if err <= tolerance_deg else None
@@ -270,9 +275,8 @@ def check_choice(
     c = study
     hs = c["h_mm"].values
     ang = c["angle_deg"].values  # (h, exercise, joint)
-    ok = np.all(c["status"].values == 0, axis=1)
-    if "max_penetration_mm" in c:  # a mesh whose contact penetrates beyond the bound is not a valid check
-        ok &= ~np.any(c["max_penetration_mm"].values > penetration_bound_mm, axis=1)
+    pen_all = c["max_penetration_mm"].values if "max_penetration_mm" in c else np.zeros(c["status"].shape)
+    ok = valid_checks(c["status"].values, pen_all, penetration_bound_mm)
     w = c["wall_time_s"].values
     solved_any = np.isfinite(w).any(axis=1)  # a mesh the study left out (NOT_SOLVED) has no time
     wall = np.full(hs.size, np.nan)

@@ -17,7 +17,8 @@ bounds block progress: the bounded step changes no pressure by ``min_step_kpa`` 
 (``out_of_reach``) the linearised response J, over the whole box and with no step limit, still misses some angle by
 more than ``out_of_reach`` tolerances, so that no forward solve inside the bounds is expected to reach the target
 (where the first J, the reduced-order chain's, bends more than the FEA, as on the checks measured, the test errs on
-the side of trying; the Broyden updates bring J to the FEA's slopes).  The chambers that block are those at a bound whose pressure the unbounded step would push past it.
+the side of trying; the Broyden updates bring J to the FEA's slopes).  The chambers that block are those at a
+bound whose pressure the unbounded step would push past it.
 """
 
 from __future__ import annotations

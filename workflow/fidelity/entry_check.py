@@ -70,8 +70,8 @@ def write_check_study(
     finest (the reference) and then the others from the coarsest up, and stops
     at the first whose angles are within ``tolerance_deg`` of the reference with
     every exercise converged and its penetration within ``penetration_bound_mm``
-    (see :func:`mesh_order`); the meshes left out keep status
-    :data:`NOT_SOLVED` and NaN values.
+    (:func:`workflow.common.fidelity_choice.search_meshes`); the meshes left out
+    keep status ``NOT_SOLVED`` (-1) and NaN values.
     """
 
     s = load_patient_setup(
